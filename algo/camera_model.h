@@ -1,0 +1,67 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Pinhole camera with Brown-Conrady distortion (k1, k2, p1, p2), as in
+ * method.md section 2 and OpenCV's first four coefficients.
+ *
+ * Units: pixels for (u, v); normalised image coordinates (x, y) = (X/Z, Y/Z);
+ * camera-frame points in mm. Allocates: never.
+ */
+#pragma once
+
+#include <string>
+
+#include <Eigen/Core>
+
+namespace dockpose {
+
+struct CameraIntrinsics {
+	int width = 0;
+	int height = 0;
+	double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
+	double k1 = 0.0, k2 = 0.0, p1 = 0.0, p2 = 0.0;
+
+	/* Empty when valid, else a sentence naming the bad value. Allocates: the message. */
+	std::string validate() const;
+};
+
+class CameraModel
+{
+public:
+	explicit CameraModel(const CameraIntrinsics &intrinsics);
+
+	const CameraIntrinsics &intrinsics() const { return k_; }
+
+	/* Ideal normalised (x, y) -> distorted normalised (x', y'). */
+	Eigen::Vector2d distort(const Eigen::Vector2d &xy) const;
+
+	/*
+	 * Distorted normalised -> ideal normalised, by Newton iteration on the
+	 * distortion model. Returns false when it does not converge (a point far
+	 * outside the lens's valid field).
+	 */
+	bool undistort(const Eigen::Vector2d &xy_distorted, Eigen::Vector2d *xy) const;
+
+	/* Pixel -> ideal normalised coordinates. */
+	bool pixelToNormalized(const Eigen::Vector2d &uv, Eigen::Vector2d *xy) const;
+
+	/* Ideal normalised -> pixel (applies distortion). */
+	Eigen::Vector2d normalizedToPixel(const Eigen::Vector2d &xy) const;
+
+	/*
+	 * Camera-frame point (mm) -> pixel. Returns false for points at or behind
+	 * the camera (Z <= 1e-6 mm). When jacobian is given it receives d(u,v)/d(X,Y,Z).
+	 */
+	bool project(const Eigen::Vector3d &p_mm, Eigen::Vector2d *uv,
+		     Eigen::Matrix<double, 2, 3> *jacobian = nullptr) const;
+
+	/* True when the pixel lies inside the sensor (with a margin in pixels). */
+	bool inImage(const Eigen::Vector2d &uv, double margin_px = 0.0) const;
+
+private:
+	/* d(distorted)/d(ideal) at xy. */
+	Eigen::Matrix2d distortJacobian(const Eigen::Vector2d &xy) const;
+
+	CameraIntrinsics k_;
+};
+
+} /* namespace dockpose */

@@ -1,0 +1,48 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The LED target: LED centres in the target frame (mm) and its faces, each a
+ * convex planar quadrilateral of LED indices in cyclic order (either
+ * direction). See method.md section 3.
+ */
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "algo/capacities.h"
+#include "algo/static_vector.h"
+
+namespace dockpose {
+
+struct TargetModel {
+	std::string name;
+	StaticVector<Eigen::Vector3d, kMaxLeds> points_mm;
+	StaticVector<std::array<int, 4>, kMaxFaces> faces;
+
+	/*
+	 * Check the model: capacities, indices in range, distinct LEDs, every
+	 * face planar (within tolerance), convex and non-degenerate.
+	 * Returns an empty string when valid, else a sentence naming the problem.
+	 * Allocates: the returned message only.
+	 */
+	std::string validate() const;
+
+	/* Size of the target: largest distance between two LEDs, in mm. */
+	double diameterMm() const;
+
+	/*
+	 * Unit normal of each face pointing to the side its LEDs shine to (the
+	 * front), in the target frame. Faces that share an edge are oriented
+	 * consistently (the shared edge runs in opposite directions); each
+	 * connected group of faces then faces -z, the approach axis: at the
+	 * nominal docking pose (R = I) the camera looks along the target's +z
+	 * axis, as for the wedge of method.md. A group lying edge-on to z faces
+	 * away from the LEDs' centroid. Allocates: never.
+	 */
+	void frontNormals(StaticVector<Eigen::Vector3d, kMaxFaces> *normals) const;
+};
+
+} /* namespace dockpose */
