@@ -1,0 +1,479 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Pose solvers: rotation conventions, the closed form for four coplanar
+ * points (method.md section 5), Horn's quaternion fit (section 6) and the
+ * Levenberg-Marquardt refinement with its covariance.
+ *
+ * Everything here works on fixed-size Eigen types on the stack: nothing
+ * allocates.
+ */
+#include "algo/pose.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+
+#include "algo/capacities.h"
+
+namespace dockpose {
+
+namespace {
+
+constexpr double kDegPerRad = 180.0 / std::numbers::pi;
+constexpr double kRadPerDeg = std::numbers::pi / 180.0;
+
+/*
+ * solveFourCoplanar(): a triangle of image rays whose (twice) signed area is
+ * below this fraction of the squared diameter of the four image points is
+ * near-collinear. Image noise dominates such a triangle's area long before
+ * (the face is then within about half a degree of edge-on).
+ */
+constexpr double kMinImageTriangle = 1e-3;
+/* The same for the model triangles (the model is exact: only true degeneracy). */
+constexpr double kMinModelTriangle = 1e-6;
+
+/*
+ * hornFit(): the gap between the two largest eigenvalues of Horn's matrix,
+ * relative to the scatter of the points, below which the rotation is not
+ * determined (collinear or coincident points).
+ */
+constexpr double kMinHornGap = 1e-9;
+
+/* The triangles of a quadrilateral: kOmit[m] omits vertex m (ascending order). */
+constexpr int kOmit[4][3] = { { 1, 2, 3 }, { 0, 2, 3 }, { 0, 1, 3 }, { 0, 1, 2 } };
+
+Eigen::Matrix3d skew(const Eigen::Vector3d &v)
+{
+	Eigen::Matrix3d s;
+	s << 0.0, -v.z(), v.y(),
+		v.z(), 0.0, -v.x(),
+		-v.y(), v.x(), 0.0;
+	return s;
+}
+
+/* exp([w]x) by Rodrigues' formula (w in radians). */
+Eigen::Matrix3d expRotation(const Eigen::Vector3d &w)
+{
+	const double angle = w.norm();
+	if (angle < 1e-300)
+		return Eigen::Matrix3d::Identity();
+	return Eigen::AngleAxisd(angle, w / angle).toRotationMatrix();
+}
+
+/*
+ * Horn's rotation from the cross-covariance S = sum M'_i P'_i^T of centred
+ * model and measured points: the unit quaternion is the eigenvector of the
+ * largest eigenvalue of Horn's symmetric 4x4 matrix N(S). *gap receives the
+ * difference of the two largest eigenvalues (zero when the rotation is not
+ * determined).
+ */
+bool hornRotation(const Eigen::Matrix3d &S, Eigen::Matrix3d *R, double *gap)
+{
+	const double sxx = S(0, 0), sxy = S(0, 1), sxz = S(0, 2);
+	const double syx = S(1, 0), syy = S(1, 1), syz = S(1, 2);
+	const double szx = S(2, 0), szy = S(2, 1), szz = S(2, 2);
+
+	Eigen::Matrix4d N;
+	N << sxx + syy + szz, syz - szy, szx - sxz, sxy - syx,
+		syz - szy, sxx - syy - szz, sxy + syx, szx + sxz,
+		szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy,
+		sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz;
+
+	const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> es(N);
+	if (es.info() != Eigen::Success)
+		return false;
+	/* Eigenvalues are in increasing order. */
+	*gap = es.eigenvalues()(3) - es.eigenvalues()(2);
+	const Eigen::Vector4d v = es.eigenvectors().col(3);
+	const Eigen::Quaterniond q(v(0), v(1), v(2), v(3));
+	*R = q.normalized().toRotationMatrix();
+	return true;
+}
+
+/* Rotation angle of a rotation matrix, radians, accurate at 0 and near pi. */
+double rotationAngleRad(const Eigen::Matrix3d &R)
+{
+	const double c = 0.5 * (R.trace() - 1.0);
+	const Eigen::Vector3d s{ R(2, 1) - R(1, 2), R(0, 2) - R(2, 0), R(1, 0) - R(0, 1) };
+	return std::atan2(0.5 * s.norm(), c);
+}
+
+} /* namespace */
+
+Eigen::Quaterniond quaternionFromRotation(const Eigen::Matrix3d &R)
+{
+	Eigen::Quaterniond q(R);
+	q.normalize();
+	if (q.w() < 0.0)
+		q.coeffs() = -q.coeffs();
+	return q;
+}
+
+/*
+ * R = Rx(a) Ry(b) Rz(c) =
+ *   [ cb cc,               -cb sc,                sb    ]
+ *   [ ca sc + sa sb cc,     ca cc - sa sb sc,    -sa cb ]
+ *   [ sa sc - ca sb cc,     sa cc + ca sb sc,     ca cb ]
+ */
+Eigen::Vector3d rollPanTiltDegFromRotation(const Eigen::Matrix3d &R)
+{
+	const double cb = std::hypot(R(1, 2), R(2, 2));
+	/* At gimbal lock (pan = +-90 deg) only roll +- tilt is defined: take roll = 0. */
+	const double roll = cb > 1e-12 ? std::atan2(-R(1, 2), R(2, 2)) : 0.0;
+	const double ca = std::cos(roll), sa = std::sin(roll);
+	/*
+	 * Pan and tilt from Rx(roll)^T R = Ry(pan) Rz(tilt), whose second row is
+	 * (sin tilt, cos tilt, 0) and whose third column is (sb, 0, cb): this
+	 * stays consistent with R even close to gimbal lock.
+	 */
+	const double pan = std::atan2(R(0, 2), ca * R(2, 2) - sa * R(1, 2));
+	const double tilt = std::atan2(ca * R(1, 0) + sa * R(2, 0), ca * R(1, 1) + sa * R(2, 1));
+	/* Keep pan within [-90, 90] after the conversion to degrees. */
+	return { roll * kDegPerRad, std::clamp(pan * kDegPerRad, -90.0, 90.0), tilt * kDegPerRad };
+}
+
+Eigen::Matrix3d rotationFromRollPanTiltDeg(const Eigen::Vector3d &rpy_deg)
+{
+	const Eigen::Vector3d r = rpy_deg * kRadPerDeg;
+	return (Eigen::AngleAxisd(r.x(), Eigen::Vector3d::UnitX()) *
+		Eigen::AngleAxisd(r.y(), Eigen::Vector3d::UnitY()) *
+		Eigen::AngleAxisd(r.z(), Eigen::Vector3d::UnitZ()))
+		.toRotationMatrix();
+}
+
+double rotationAngleDeg(const Eigen::Matrix3d &a, const Eigen::Matrix3d &b)
+{
+	return rotationAngleRad(a.transpose() * b) * kDegPerRad;
+}
+
+bool solveFourCoplanar(const Eigen::Vector3d model_mm[4], const Eigen::Vector2d xy[4], Pose *pose,
+		       double *fit_rms_mm)
+{
+	/* Model: the face normal, then the signed areas of the four triangles in the face's plane. */
+	Eigen::Vector3d c[4];
+	int best = 0;
+	double best_norm2 = -1.0;
+	for (int m = 0; m < 4; ++m) {
+		const Eigen::Vector3d &pi = model_mm[kOmit[m][0]];
+		c[m] = (model_mm[kOmit[m][1]] - pi).cross(model_mm[kOmit[m][2]] - pi);
+		const double n2 = c[m].squaredNorm();
+		if (n2 > best_norm2) {
+			best_norm2 = n2;
+			best = m;
+		}
+	}
+	Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+	for (int m = 0; m < 4; ++m)
+		normal += c[m].dot(c[best]) >= 0.0 ? c[m] : Eigen::Vector3d(-c[m]);
+	const double normal_norm = normal.norm();
+
+	double model_d2 = 0.0, image_d2 = 0.0;
+	double d_model[6];
+	int e = 0;
+	for (int i = 0; i < 4; ++i)
+		for (int j = i + 1; j < 4; ++j, ++e) {
+			const double dm2 = (model_mm[i] - model_mm[j]).squaredNorm();
+			d_model[e] = std::sqrt(dm2);
+			model_d2 = std::max(model_d2, dm2);
+			image_d2 = std::max(image_d2, (xy[i] - xy[j]).squaredNorm());
+		}
+	if (!(normal_norm > 0.0) || !(model_d2 > 0.0) || !(image_d2 > 0.0))
+		return false;
+	normal /= normal_norm;
+
+	/*
+	 * Depth ratios Z_m = D_(m) / A_(m), with D and A twice the signed
+	 * areas of the image and model triangles that omit m. D is det[q_i q_j
+	 * q_k] for q = (x, y, 1), i.e. the 2-D cross product of the image edges.
+	 */
+	double z[4];
+	int positive = 0;
+	for (int m = 0; m < 4; ++m) {
+		const double A = normal.dot(c[m]);
+		const Eigen::Vector2d &qi = xy[kOmit[m][0]];
+		const Eigen::Vector2d u = xy[kOmit[m][1]] - qi;
+		const Eigen::Vector2d v = xy[kOmit[m][2]] - qi;
+		const double D = u.x() * v.y() - u.y() * v.x();
+		if (!(std::abs(A) > kMinModelTriangle * model_d2) || !(std::abs(D) > kMinImageTriangle * image_d2))
+			return false;
+		z[m] = D / A;
+		positive += z[m] > 0.0;
+	}
+	/*
+	 * Z_i Z_j Z_k D = 2 h A with h the signed distance of the camera from
+	 * the face's plane: the four ratios share the sign of h, which depends
+	 * on the side the face is seen from. Mixed signs mean the points cannot
+	 * be this face in this order.
+	 */
+	if (positive != 0 && positive != 4)
+		return false;
+	const double sign = positive == 4 ? 1.0 : -1.0;
+
+	Eigen::Vector3d P[4];
+	for (int m = 0; m < 4; ++m)
+		P[m] = sign * z[m] * Eigen::Vector3d(xy[m].x(), xy[m].y(), 1.0);
+
+	/* Common scale: least squares over the six pairwise distances. */
+	double num = 0.0, den = 0.0;
+	e = 0;
+	for (int i = 0; i < 4; ++i)
+		for (int j = i + 1; j < 4; ++j, ++e) {
+			const double d = (P[i] - P[j]).norm();
+			num += d * d_model[e];
+			den += d * d;
+		}
+	if (!(den > 0.0))
+		return false;
+	const double scale = num / den;
+	for (Eigen::Vector3d &p : P)
+		p *= scale;
+
+	/* Rigid fit of the model to the reconstructed points. */
+	Pose fit;
+	double sse = 0.0;
+	if (!hornFit(model_mm, P, 4, &fit, false, nullptr, &sse))
+		return false;
+	if (!fit.R.allFinite() || !fit.t_mm.allFinite() || !std::isfinite(sse))
+		return false;
+	*pose = fit;
+	if (fit_rms_mm)
+		*fit_rms_mm = std::sqrt(sse / 4.0);
+	return true;
+}
+
+bool hornFit(const Eigen::Vector3d *model_mm, const Eigen::Vector3d *measured_mm, int n, Pose *pose,
+	     bool estimate_scale, double *scale, double *sse)
+{
+	if (n < 3)
+		return false;
+
+	Eigen::Vector3d m_bar = Eigen::Vector3d::Zero(), p_bar = Eigen::Vector3d::Zero();
+	for (int i = 0; i < n; ++i) {
+		m_bar += model_mm[i];
+		p_bar += measured_mm[i];
+	}
+	m_bar /= n;
+	p_bar /= n;
+
+	Eigen::Matrix3d S = Eigen::Matrix3d::Zero();
+	double m2 = 0.0, p2 = 0.0;
+	for (int i = 0; i < n; ++i) {
+		const Eigen::Vector3d mc = model_mm[i] - m_bar;
+		const Eigen::Vector3d pc = measured_mm[i] - p_bar;
+		S += mc * pc.transpose();
+		m2 += mc.squaredNorm();
+		p2 += pc.squaredNorm();
+	}
+	if (!(m2 > 0.0) || !(p2 > 0.0) || !S.allFinite())
+		return false;
+
+	Eigen::Matrix3d R;
+	double gap = 0.0;
+	if (!hornRotation(S, &R, &gap))
+		return false;
+	/*
+	 * For noise-free data the gap is 2 (c2 + c3) with c1 >= c2 >= c3 the
+	 * principal moments of the points: zero exactly when they are collinear.
+	 * Collinear measured points make S rank one, with the same effect.
+	 */
+	if (!(gap > kMinHornGap * std::sqrt(m2 * p2)))
+		return false;
+
+	const double s = estimate_scale ? std::sqrt(p2 / m2) : 1.0;
+	pose->R = R;
+	pose->t_mm = p_bar - s * R * m_bar;
+	if (scale)
+		*scale = s;
+	if (sse) {
+		double sum = 0.0;
+		for (int i = 0; i < n; ++i)
+			sum += (measured_mm[i] - (s * R * model_mm[i] + pose->t_mm)).squaredNorm();
+		*sse = sum;
+	}
+	return true;
+}
+
+namespace {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+struct Evaluation {
+	double sse = 0.0;    /* sum of squared pixel errors */
+	double max_px = 0.0; /* largest pixel error */
+	Matrix6d JtJ = Matrix6d::Zero();
+	Vector6d Jtr = Vector6d::Zero();
+};
+
+/*
+ * Reprojection residuals r_i = project(R M_i + t) - pixel_i and the normal
+ * equations of their jacobian w.r.t. (dt, w): d(R M + t) = dt - [R M]x w.
+ * False when a point is at or behind the camera.
+ */
+bool evaluate(const CameraModel &camera, const Eigen::Vector3d *model_mm, const Eigen::Vector2d *pixels, int n,
+	      const Pose &pose, bool with_jacobian, Evaluation *ev)
+{
+	ev->sse = 0.0;
+	ev->max_px = 0.0;
+	ev->JtJ.setZero();
+	ev->Jtr.setZero();
+	for (int i = 0; i < n; ++i) {
+		const Eigen::Vector3d rm = pose.R * model_mm[i];
+		Eigen::Vector2d uv;
+		Eigen::Matrix<double, 2, 3> jp;
+		if (!camera.project(rm + pose.t_mm, &uv, with_jacobian ? &jp : nullptr))
+			return false;
+		const Eigen::Vector2d r = uv - pixels[i];
+		const double r2 = r.squaredNorm();
+		ev->sse += r2;
+		ev->max_px = std::max(ev->max_px, std::sqrt(r2));
+		if (with_jacobian) {
+			Eigen::Matrix<double, 2, 6> J;
+			J.leftCols<3>() = jp;
+			J.rightCols<3>() = -jp * skew(rm);
+			ev->JtJ.noalias() += J.transpose() * J;
+			ev->Jtr.noalias() += J.transpose() * r;
+		}
+	}
+	return std::isfinite(ev->sse);
+}
+
+Pose applyStep(const Pose &pose, const Vector6d &delta)
+{
+	Pose out;
+	out.t_mm = pose.t_mm + delta.head<3>();
+	const Eigen::Matrix3d R = expRotation(delta.tail<3>()) * pose.R;
+	/* Keep R orthonormal over many small updates. */
+	out.R = Eigen::Quaterniond(R).normalized().toRotationMatrix();
+	return out;
+}
+
+} /* namespace */
+
+bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, const Eigen::Vector2d *pixels,
+		int n, const Pose &initial, const RefineOptions &options, RefineResult *result)
+{
+	*result = RefineResult{};
+	result->pose = initial;
+	if (n < 3 || n > static_cast<int>(kMaxLeds) || !initial.R.allFinite() || !initial.t_mm.allFinite())
+		return false;
+
+	Pose pose = initial;
+	Evaluation ev;
+	if (!evaluate(camera, model_mm, pixels, n, pose, true, &ev))
+		return false;
+
+	/* Marquardt's damping, scaled by the diagonal of J^T J. */
+	double lambda = 1e-3;
+	constexpr double kMaxLambda = 1e12;
+	int it = 0;
+	bool converged = false;
+	while (it < options.max_iterations && !converged) {
+		++it;
+		/* A perfect fit (noise-free data) cannot improve further. */
+		if (ev.sse <= 1e-24 * n) {
+			converged = true;
+			break;
+		}
+		bool accepted = false;
+		while (!accepted && lambda <= kMaxLambda) {
+			Matrix6d A = ev.JtJ;
+			A.diagonal() += lambda * ev.JtJ.diagonal();
+			const Eigen::LDLT<Matrix6d> ldlt(A);
+			if (ldlt.info() != Eigen::Success) {
+				lambda *= 10.0;
+				continue;
+			}
+			const Vector6d delta = ldlt.solve(-ev.Jtr);
+			if (!delta.allFinite()) {
+				lambda *= 10.0;
+				continue;
+			}
+			const Pose candidate = applyStep(pose, delta);
+			Evaluation next;
+			if (evaluate(camera, model_mm, pixels, n, candidate, true, &next) && next.sse < ev.sse) {
+				const double decrease = ev.sse - next.sse;
+				const bool small_step = delta.head<3>().norm() <= 1e-10 * (1.0 + pose.t_mm.norm()) &&
+							delta.tail<3>().norm() <= 1e-12;
+				pose = candidate;
+				ev = next;
+				lambda = std::max(lambda * 0.2, 1e-9);
+				accepted = true;
+				if (small_step || decrease <= 1e-12 * ev.sse)
+					converged = true;
+			} else {
+				lambda *= 10.0;
+			}
+		}
+		/*
+		 * No step decreases the error, not even a tiny gradient step: the
+		 * pose is at the minimum to working precision.
+		 */
+		if (!accepted)
+			converged = true;
+	}
+
+	result->pose = pose;
+	result->iterations = it;
+	result->converged = converged;
+	result->rms_px = std::sqrt(ev.sse / n);
+	result->max_px = ev.max_px;
+
+	/*
+	 * Covariance sigma^2 (J^T J)^-1, inverted after Jacobi scaling (the
+	 * translation and rotation columns differ by orders of magnitude).
+	 */
+	const Vector6d d = ev.JtJ.diagonal();
+	if (!(d.minCoeff() > 0.0) || !d.allFinite())
+		return false;
+	const Vector6d inv_sqrt = d.cwiseSqrt().cwiseInverse();
+	const Matrix6d B = inv_sqrt.asDiagonal() * ev.JtJ * inv_sqrt.asDiagonal();
+	const Eigen::SelfAdjointEigenSolver<Matrix6d> es(B);
+	if (es.info() != Eigen::Success)
+		return false;
+	const Vector6d lambdas = es.eigenvalues();
+	if (!(lambdas(0) > 1e-12 * lambdas(5)))
+		return false;
+	const Matrix6d B_inv = es.eigenvectors() * lambdas.cwiseInverse().asDiagonal() *
+			       es.eigenvectors().transpose();
+	double sigma2 = options.sigma_px * options.sigma_px;
+	if (2 * n > 6)
+		sigma2 = std::max(sigma2, ev.sse / (2 * n - 6));
+	result->covariance = sigma2 * (inv_sqrt.asDiagonal() * B_inv * inv_sqrt.asDiagonal());
+	return true;
+}
+
+Eigen::Vector3d rollPanTiltSigmaDeg(const Eigen::Matrix3d &R, const Eigen::Matrix<double, 6, 6> &covariance)
+{
+	/*
+	 * With R = Rx(a) Ry(b) Rz(c), dR R^T = [w]x where
+	 * w = M (da, db, dc), M = [e_x, Rx(a) e_y, Rx(a) Ry(b) e_z]
+	 *   = [1, 0, sb; 0, ca, -sa cb; 0, sa, ca cb], det M = cb.
+	 * So cov(a, b, c) = M^-1 cov(w) M^-T.
+	 */
+	const Eigen::Vector3d rpy = rollPanTiltDegFromRotation(R) * kRadPerDeg;
+	const double ca = std::cos(rpy.x()), sa = std::sin(rpy.x());
+	const double cb = std::cos(rpy.y()), sb = std::sin(rpy.y());
+	const Eigen::Matrix3d Cw = covariance.bottomRightCorner<3, 3>();
+	if (std::abs(cb) < 1e-12) {
+		/* Gimbal lock: roll and tilt are not separable, only pan is. */
+		const double inf = std::numeric_limits<double>::infinity();
+		const Eigen::Vector3d e_pan{ 0.0, ca, sa }; /* dpan = <e_pan, w> at cb = 0 */
+		return { inf, std::sqrt(std::max(0.0, e_pan.dot(Cw * e_pan))) * kDegPerRad, inf };
+	}
+	Eigen::Matrix3d M;
+	M << 1.0, 0.0, sb,
+		0.0, ca, -sa * cb,
+		0.0, sa, ca * cb;
+	const Eigen::Matrix3d Minv = M.inverse();
+	const Eigen::Matrix3d C = Minv * Cw * Minv.transpose();
+	return Eigen::Vector3d(std::sqrt(std::max(0.0, C(0, 0))), std::sqrt(std::max(0.0, C(1, 1))),
+			       std::sqrt(std::max(0.0, C(2, 2)))) *
+	       kDegPerRad;
+}
+
+} /* namespace dockpose */
