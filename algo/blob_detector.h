@@ -1,0 +1,132 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * From an 8-bit frame to LED candidate blobs (method.md section 1, steps 2-4):
+ *  - integer thresholding, a fixed level or an automatic level per tile from
+ *    the frame's own statistics (background and noise), see threshold.h;
+ *  - ONE streaming pass over the frame that thresholds, builds runs, merges
+ *    them into components with union-find and accumulates integer,
+ *    intensity-weighted moments; no label image;
+ *  - clean-up (single pixels and specks dropped, gaps inside a row filled) and
+ *    the shape filter (too elongated, too large, too small, too sparse).
+ *
+ * Weights: a segmented pixel of value v in a tile of level T weighs
+ * w = v - T + 1 (>= 1), so a spot's centroid is not biased by the pixels that
+ * just cross the threshold. Coordinates are integer pixel indices (x, y);
+ * centroids are in pixels with (0, 0) at the centre of the top-left pixel.
+ */
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "algo/capacities.h"
+#include "algo/image.h"
+#include "algo/static_vector.h"
+#include "algo/threshold.h"
+
+namespace dockpose {
+
+/* Raw integer moments of one connected component. */
+struct BlobMoments {
+	std::uint32_t area = 0;	 /* segmented pixels */
+	std::uint64_t sum_w = 0; /* sum of weights */
+	std::uint64_t sum_wx = 0, sum_wy = 0;
+	std::uint64_t sum_wxx = 0, sum_wyy = 0, sum_wxy = 0;
+	std::uint16_t x_min = 0, x_max = 0, y_min = 0, y_max = 0;
+	std::uint8_t peak = 0; /* largest pixel value */
+};
+
+/* A blob that passed the clean-up and shape filter. */
+struct Blob {
+	double u_px = 0.0, v_px = 0.0; /* intensity-weighted centroid */
+	double area_px = 0.0;	       /* segmented pixels (gaps filled) */
+	double weight = 0.0;	       /* sum of weights */
+	double sigma_major_px = 0.0;   /* weighted std-dev along the major axis */
+	double sigma_minor_px = 0.0;   /* ... and the minor axis */
+	double elongation = 1.0;       /* sigma_major / sigma_minor */
+	double fill = 1.0;	       /* area / (pi * 4 sigma_major sigma_minor), ~1 for a disc */
+	std::uint8_t peak = 0;
+	std::uint16_t x_min = 0, x_max = 0, y_min = 0, y_max = 0;
+};
+
+struct BlobFilterConfig {
+	/* Smaller components are specks or hot pixels (1 drops single pixels). */
+	int min_area_px = 2;
+	/* Larger components are not LED spots; 0 = 1/200 of the frame. */
+	int max_area_px = 0;
+	/* sigma_major / sigma_minor above this is a glint, not an LED. */
+	double max_elongation = 4.0;
+	/* Fill ratio below this is too sparse for an LED spot. */
+	double min_fill = 0.25;
+	/* Gaps of up to this many pixels inside a row are filled (closing). */
+	int fill_gap_px = 1;
+};
+
+struct BlobStats {
+	int components = 0;	    /* connected components found */
+	int dropped_small = 0;	    /* specks, single pixels */
+	int dropped_large = 0;
+	int dropped_shape = 0;	    /* elongated or sparse */
+	int dropped_capacity = 0;   /* valid blobs beyond kMaxCandidates (weakest dropped) */
+	bool component_overflow = false; /* more than kMaxComponents: frame too cluttered */
+	ThresholdStats threshold;
+};
+
+class BlobDetector
+{
+public:
+	/* Buffers sized for frames up to max_width x max_height. Allocates: here only. */
+	BlobDetector(int max_width, int max_height, const ThresholdConfig &threshold,
+		     const BlobFilterConfig &filter);
+	~BlobDetector();
+	BlobDetector(const BlobDetector &) = delete;
+	BlobDetector &operator=(const BlobDetector &) = delete;
+
+	/*
+	 * Threshold, label, measure and filter one frame. Blobs come out sorted by
+	 * weight, strongest first, at most kMaxCandidates. Returns false when the
+	 * frame cannot be processed (larger than the buffers, invalid view,
+	 * component overflow); stats says why. Allocates: never.
+	 */
+	bool detect(const ImageView &image, StaticVector<Blob, kMaxCandidates> *blobs, BlobStats *stats);
+
+	/*
+	 * Lower level, for tests and tools: label `image` against `map` and call
+	 * sink(const BlobMoments &) once per connected component (8-connected,
+	 * after gap filling), before any filtering. Returns false on overflow.
+	 * Allocates: never.
+	 */
+	template<typename Sink>
+	bool label(const ImageView &image, const ThresholdMap &map, Sink &&sink);
+
+	const BlobFilterConfig &filterConfig() const { return filter_; }
+	Thresholder &thresholder() { return thresholder_; }
+
+	/* From raw moments to a Blob (centroid, axes, fill). */
+	static Blob measure(const BlobMoments &m);
+
+private:
+	struct Impl;
+	/* Label into the component list of impl_ (componentCount() entries). */
+	bool labelImpl(const ImageView &image, const ThresholdMap &map);
+	std::size_t componentCount() const;
+	const BlobMoments *components() const;
+
+	Thresholder thresholder_;
+	BlobFilterConfig filter_;
+	Impl *impl_;
+};
+
+template<typename Sink>
+bool BlobDetector::label(const ImageView &image, const ThresholdMap &map, Sink &&sink)
+{
+	if (!labelImpl(image, map))
+		return false;
+	const BlobMoments *c = components();
+	const std::size_t n = componentCount();
+	for (std::size_t i = 0; i < n; ++i)
+		sink(c[i]);
+	return true;
+}
+
+} /* namespace dockpose */

@@ -1,0 +1,435 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Fixed and automatic segmentation levels, see threshold.h.
+ */
+#include "algo/threshold.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <cstring>
+
+namespace dockpose {
+
+namespace {
+
+/* 1.4826 / sqrt(2): from the MAD of a difference of two pixels to one pixel's sigma. */
+constexpr UQ16_16 kMadToSigma{ 1.4826 * 0.70710678118654752440 };
+
+int clampInt(int v, int lo, int hi)
+{
+	return v < lo ? lo : (v > hi ? hi : v);
+}
+
+/* Number of tiles of `tile` pixels covering `size` pixels. */
+int tilesFor(int size, int tile)
+{
+	return (size + tile - 1) / tile;
+}
+
+/*
+ * Sample positions in one tile [a, a + length): n = ceil(length / step)
+ * positions `step` apart, centred in the tile.
+ */
+void samplePositions(int a, int length, int step, int *start, int *count)
+{
+	const int n = (length + step - 1) / step;
+	*count = n;
+	*start = a + (length - 1 - (n - 1) * step) / 2;
+}
+
+} /* namespace */
+
+ThresholdMap::ThresholdMap(int width, int height, int tile_px, std::uint8_t level)
+{
+	tile_px_ = clampInt(tile_px, 1, kMaxFrameSide);
+	cols_ = std::max(1, tilesFor(std::max(width, 1), tile_px_));
+	rows_ = std::max(1, tilesFor(std::max(height, 1), tile_px_));
+	levels_.assign(static_cast<std::size_t>(cols_) * static_cast<std::size_t>(rows_), level);
+}
+
+ThresholdMap ThresholdMap::uniform(std::uint8_t level)
+{
+	ThresholdMap map(1, 1, kMaxFrameSide, level);
+	return map;
+}
+
+void ThresholdMap::setUniform(std::uint8_t level)
+{
+	if (levels_.empty()) {
+		/* no storage: the map stays without tiles and reads `level` everywhere */
+		empty_level_ = level;
+		return;
+	}
+	tile_px_ = kMaxFrameSide;
+	cols_ = 1;
+	rows_ = 1;
+	levels_[0] = level;
+}
+
+bool ThresholdMap::reshape(int width, int height, int tile_px)
+{
+	if (width < 1 || height < 1 || tile_px < 1)
+		return false;
+	const int cols = tilesFor(width, tile_px);
+	const int rows = tilesFor(height, tile_px);
+	if (static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows) > levels_.size())
+		return false;
+	tile_px_ = tile_px;
+	cols_ = cols;
+	rows_ = rows;
+	return true;
+}
+
+void ThresholdMap::fill(std::uint8_t level)
+{
+	std::fill(levels_.begin(), levels_.begin() + static_cast<std::ptrdiff_t>(cols_) * rows_,
+		  level);
+}
+
+Thresholder::Thresholder(int max_width, int max_height, const ThresholdConfig &config)
+	: config_(config)
+{
+	max_width_ = clampInt(max_width, 1, kMaxFrameSide);
+	max_height_ = clampInt(max_height, 1, kMaxFrameSide);
+
+	config_.fixed_level = clampInt(config.fixed_level, 0, 255);
+	config_.min_contrast = clampInt(config.min_contrast, 0, 255);
+	config_.k_sigma = std::clamp(config.k_sigma, 0.0, 255.0);
+	if (!(config_.k_sigma == config_.k_sigma))
+		config_.k_sigma = 0.0;
+	tile_px_ = clampInt(config.tile_px, 8, kMaxFrameSide);
+	/* at least 4 x 4 and at most 64 x 64 samples per tile */
+	step_px_ = clampInt(config.sample_step_px, 1, std::max(1, tile_px_ / 4));
+	step_px_ = std::max(step_px_, (tile_px_ + 63) / 64);
+	config_.tile_px = tile_px_;
+	config_.sample_step_px = step_px_;
+
+	k_sigma_ = UQ8_8(config_.k_sigma);
+	min_contrast_ = UQ16_16(config_.min_contrast);
+
+	const int cols = tilesFor(max_width_, tile_px_);
+	const int rows = tilesFor(max_height_, tile_px_);
+	map_ = ThresholdMap(max_width_, max_height_, tile_px_);
+	col_start_.assign(static_cast<std::size_t>(cols), 0);
+	col_count_.assign(static_cast<std::size_t>(cols), 0);
+	row_start_.assign(static_cast<std::size_t>(rows), 0);
+	row_count_.assign(static_cast<std::size_t>(rows), 0);
+	hist_.assign(static_cast<std::size_t>(cols) * 256, 0);
+	col_min_.assign(static_cast<std::size_t>(cols), 255);
+	medians_.assign(static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows), 0);
+	padded_.assign(static_cast<std::size_t>(cols + 2) * static_cast<std::size_t>(rows + 2), 0);
+	corners_.assign(static_cast<std::size_t>(cols + 1) * static_cast<std::size_t>(rows + 1), 0);
+}
+
+const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats *stats)
+{
+	ThresholdStats local;
+	ThresholdStats *st = stats ? stats : &local;
+	*st = ThresholdStats{};
+
+	if (!image.valid() || image.width > max_width_ || image.height > max_height_) {
+		map_.setUniform(255);
+		st->level_min = st->level_max = 255;
+		st->tiles_x = st->tiles_y = 1;
+		st->valid = false;
+		return map_;
+	}
+
+	if (config_.mode == ThresholdMode::Fixed) {
+		map_.setUniform(static_cast<std::uint8_t>(config_.fixed_level));
+		st->level_min = st->level_max = config_.fixed_level;
+		st->tiles_x = st->tiles_y = 1;
+		st->valid = true;
+		return map_;
+	}
+
+	computeAuto(image, st);
+	return map_;
+}
+
+void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
+{
+	const int width = image.width;
+	const int height = image.height;
+	const int step = step_px_;
+	const int tile = tile_px_;
+
+	for (auto &bank : diff_hist_)
+		bank.fill(0);
+	std::uint32_t *dh = diff_hist_[0].data(); /* the 4 banks are contiguous */
+	static_assert(sizeof(diff_hist_) == sizeof(std::uint32_t[4][256]));
+
+	/*
+	 * The full tiles share one sample pattern (offset col_start_[0] in the
+	 * tile, col_count_[0] samples). They are sampled with the tile loop
+	 * innermost, so that consecutive increments go to different histograms
+	 * (no store-to-load chains on a popular bin). The last tile column may be
+	 * partial and sampled on its own.
+	 */
+	const int n_full = col_count_[0];
+	const int off = col_start_[0];
+	const std::ptrdiff_t tile_stride = tile;
+	/* A pattern whose last pair reaches into the next tile must not do so at the frame's edge. */
+	const bool pair_leaves_tile = off + (n_full - 1) * step + 1 >= tile;
+	const int full = width % tile == 0 && !pair_leaves_tile ? cols : cols - 1;
+	std::uint16_t *hist = hist_.data();
+	std::uint8_t *col_min = col_min_.data();
+
+	for (int r = 0; r < rows; ++r) {
+		std::fill(col_min, col_min + cols, std::uint8_t{ 255 });
+
+		for (int j = 0; j < row_count_[r]; ++j) {
+			const int y = row_start_[r] + j * step;
+			const std::uint8_t *p = image.row(y);
+			/* With a dense sample the noise comes from every other sample row (plenty of pairs). */
+			const bool noise_row = step >= 12 || (j & 1) == 0;
+
+			for (int i = 0; i < n_full; ++i) {
+				const std::uint8_t *q =
+					p + off + static_cast<std::ptrdiff_t>(i) * step;
+				for (int c = 0; c < full; ++c) {
+					const unsigned v = q[c * tile_stride];
+					++hist[static_cast<std::size_t>(c) * 256 + v];
+					col_min[c] = static_cast<std::uint8_t>(
+						v < col_min[c] ? v : col_min[c]);
+				}
+				if (noise_row) {
+					/* pairs (x, x + 1): x + 1 is inside the same full tile */
+					for (int c = 0; c < full; ++c) {
+						const int d =
+							static_cast<int>(q[c * tile_stride + 1]) -
+							static_cast<int>(q[c * tile_stride]);
+						++dh[static_cast<std::size_t>(c & 3) * 256 +
+						     static_cast<std::size_t>(d < 0 ? -d : d)];
+					}
+				}
+			}
+
+			/*
+			 * The partial last tile. Its last sample may sit on the last pixel:
+			 * it pairs with its left neighbour; a frame one pixel wide pairs
+			 * vertically.
+			 */
+			for (int c = full; c < cols; ++c) {
+				std::uint16_t *h = hist + static_cast<std::size_t>(c) * 256;
+				unsigned m = col_min[c];
+				for (int i = 0, x = col_start_[c]; i < col_count_[c];
+				     ++i, x += step) {
+					const unsigned v = p[x];
+					++h[v];
+					m = v < m ? v : m;
+					if (!noise_row)
+						continue;
+					int d;
+					if (x + 1 < width)
+						d = static_cast<int>(p[x + 1]) -
+						    static_cast<int>(v);
+					else if (x >= 1)
+						d = static_cast<int>(p[x - 1]) -
+						    static_cast<int>(v);
+					else if (y + 1 < height)
+						d = static_cast<int>(image.row(y + 1)[x]) -
+						    static_cast<int>(v);
+					else if (y >= 1)
+						d = static_cast<int>(image.row(y - 1)[x]) -
+						    static_cast<int>(v);
+					else
+						continue; /* a 1 x 1 frame: no pair */
+					++dh[static_cast<std::size_t>(i & 3) * 256 +
+					     static_cast<std::size_t>(d < 0 ? -d : d)];
+				}
+				col_min[c] = static_cast<std::uint8_t>(m);
+			}
+		}
+
+		/* Lower median of each tile: walk up from its smallest sample, clearing behind. */
+		for (int c = 0; c < cols; ++c) {
+			std::uint16_t *h = hist + static_cast<std::size_t>(c) * 256;
+			const int n = col_count_[c] * row_count_[r];
+			const int half = (n + 1) / 2;
+			int v = col_min[c];
+			int cum = h[v];
+			while (cum < half && v < 255)
+				cum += h[++v];
+			medians_[static_cast<std::size_t>(r) * cols + c] =
+				static_cast<std::uint8_t>(v);
+			/* clear what is left above the median, then what the walk passed */
+			int rest = n - cum;
+			for (int u = v + 1; rest > 0 && u < 256; ++u) {
+				rest -= h[u];
+				h[u] = 0;
+			}
+			for (int u = col_min[c]; u <= v; ++u)
+				h[u] = 0;
+		}
+	}
+}
+
+UQ16_16 Thresholder::noiseSigma() const
+{
+	std::uint64_t n = 0;
+	std::array<std::uint32_t, 256> h{};
+	for (std::size_t d = 0; d < 256; ++d) {
+		h[d] = diff_hist_[0][d] + diff_hist_[1][d] + diff_hist_[2][d] + diff_hist_[3][d];
+		n += h[d];
+	}
+	if (n == 0)
+		return UQ16_16(0);
+
+	/*
+	 * Median of |d| interpolated within its bin: value 0 stands for |d| in
+	 * [0, 0.5), value b >= 1 for [b - 0.5, b + 0.5). In Q16.16.
+	 */
+	std::uint64_t below = 0;
+	for (std::size_t b = 0; b < 256; ++b) {
+		const std::uint64_t count = h[b];
+		if (2 * (below + count) >= n && count > 0) {
+			const std::uint64_t lo = b == 0 ? 0 : (2 * b - 1) << 15;
+			const std::uint64_t width = b == 0 ? (1u << 15) : (1u << 16);
+			/* fraction of the bin below the median: (n/2 - below) / count */
+			const std::uint64_t within =
+				((n - 2 * below) * width + count) / (2 * count);
+			const UQ16_16 mad = UQ16_16::fromWideRaw(lo + within);
+			return fixedMul<UQ16_16>(mad, kMadToSigma);
+		}
+		below += count;
+	}
+	return UQ16_16(255);
+}
+
+void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
+{
+	const int width = image.width;
+	const int height = image.height;
+	const int tile = tile_px_;
+	const int cols = tilesFor(width, tile);
+	const int rows = tilesFor(height, tile);
+	/* always fits: the frame is within the constructor's size */
+	map_.reshape(width, height, tile);
+
+	for (int c = 0; c < cols; ++c)
+		samplePositions(c * tile, std::min(tile, width - c * tile), step_px_,
+				&col_start_[c], &col_count_[c]);
+	for (int r = 0; r < rows; ++r)
+		samplePositions(r * tile, std::min(tile, height - r * tile), step_px_,
+				&row_start_[r], &row_count_[r]);
+
+	sampleTiles(image, cols, rows);
+
+	const UQ16_16 sigma = noiseSigma();
+	const UQ16_16 contrast = std::max(fixedMul<UQ16_16>(k_sigma_, sigma), min_contrast_);
+
+	/*
+	 * Guard against spots: a tile whose own median lies more than a quarter
+	 * of the contrast above the median of its 3x3 neighbourhood (the upper
+	 * one of an even count at the borders, so that one raised tile among
+	 * four or six never moves it) takes the neighbourhood median instead.
+	 * On a planar background the two agree (up to the step of the gradient
+	 * between tiles at the borders), so the guard leaves it alone. The
+	 * guarded backgrounds go into a grid padded by one tile of linear
+	 * extrapolation.
+	 */
+	const std::int64_t margin = std::max<std::int64_t>(1, contrast.toIntFloor() / 4);
+	const int pcols = cols + 2;
+	auto P = [&](int c, int r) -> std::int32_t & {
+		return padded_[static_cast<std::size_t>(r + 1) * pcols +
+			       static_cast<std::size_t>(c + 1)];
+	};
+	auto median = [&](int c, int r) -> int {
+		return medians_[static_cast<std::size_t>(r) * cols + c];
+	};
+	std::uint64_t background_sum = 0;
+	for (int r = 0; r < rows; ++r) {
+		const int r0 = std::max(r - 1, 0), r1 = std::min(r + 1, rows - 1);
+		for (int c = 0; c < cols; ++c) {
+			const int c0 = std::max(c - 1, 0), c1 = std::min(c + 1, cols - 1);
+			const int own = median(c, r);
+			int g = own;
+			/* The median is at least the minimum: only a tile above its lowest neighbour can be an outlier. */
+			int lowest = own;
+			for (int rr = r0; rr <= r1; ++rr)
+				for (int cc = c0; cc <= c1; ++cc)
+					lowest = std::min(lowest, median(cc, rr));
+			if (own > lowest + margin) {
+				int nb[9];
+				int n = 0;
+				for (int rr = r0; rr <= r1; ++rr) {
+					for (int cc = c0; cc <= c1; ++cc) {
+						/* insertion into the sorted nb[0..n) */
+						const int v = median(cc, rr);
+						int k = n++;
+						while (k > 0 && nb[k - 1] > v) {
+							nb[k] = nb[k - 1];
+							--k;
+						}
+						nb[k] = v;
+					}
+				}
+				const int nbr = nb[n / 2];
+				if (own > nbr + margin)
+					g = nbr;
+			}
+			P(c, r) = g;
+			background_sum += static_cast<std::uint64_t>(g);
+		}
+	}
+	for (int r = 0; r < rows; ++r) {
+		P(-1, r) = cols >= 2 ? 2 * P(0, r) - P(1, r) : P(0, r);
+		P(cols, r) = cols >= 2 ? 2 * P(cols - 1, r) - P(cols - 2, r) : P(cols - 1, r);
+	}
+	for (int c = -1; c <= cols; ++c) {
+		P(c, -1) = rows >= 2 ? 2 * P(c, 0) - P(c, 1) : P(c, 0);
+		P(c, rows) = rows >= 2 ? 2 * P(c, rows - 1) - P(c, rows - 2) : P(c, rows - 1);
+	}
+
+	/*
+	 * Corner (i, j) of the tile grid (i in [0, cols], j in [0, rows]) is the
+	 * mean of the four tiles that meet there, kept as their sum (quarter
+	 * levels).
+	 */
+	const int ccols = cols + 1;
+	for (int j = 0; j <= rows; ++j) {
+		std::int32_t *corner_row = corners_.data() + static_cast<std::size_t>(j) * ccols;
+		std::int32_t left = P(-1, j - 1) + P(-1, j);
+		for (int i = 0; i <= cols; ++i) {
+			const std::int32_t right = P(i, j - 1) + P(i, j);
+			corner_row[i] = left + right;
+			left = right;
+		}
+	}
+
+	/*
+	 * The level of a tile: the largest value of the bilinear interpolation
+	 * of the backgrounds over the tile (its largest corner), at least its own
+	 * background, plus the contrast.
+	 */
+	int level_min = 255;
+	int level_max = 0;
+	for (int r = 0; r < rows; ++r) {
+		const std::int32_t *top = corners_.data() + static_cast<std::size_t>(r) * ccols;
+		const std::int32_t *bottom = top + ccols;
+		for (int c = 0; c < cols; ++c) {
+			const std::int32_t hi4 =
+				std::max(std::max(4 * P(c, r), std::max(top[c], top[c + 1])),
+					 std::max(bottom[c], bottom[c + 1]));
+			/* background in Q16.16 (quarter levels << 14) + contrast, rounded */
+			const UQ16_16 bg = UQ16_16::fromWideRaw(
+				static_cast<std::uint64_t>(std::max(hi4, 0)) << 14);
+			const int level = static_cast<int>(
+				std::min<std::int64_t>((bg + contrast).toIntRound(), 255));
+			map_.setLevel(c, r, static_cast<std::uint8_t>(level));
+			level_min = std::min(level_min, level);
+			level_max = std::max(level_max, level);
+		}
+	}
+
+	stats->level_min = level_min;
+	stats->level_max = level_max;
+	stats->background = static_cast<double>(background_sum) / static_cast<double>(cols * rows);
+	stats->noise_sigma = sigma.toDouble();
+	stats->tiles_x = cols;
+	stats->tiles_y = rows;
+	stats->valid = true;
+}
+
+} /* namespace dockpose */

@@ -1,0 +1,203 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The segmentation level of a frame (method.md section 1, step 2).
+ *
+ * A pixel of value v is segmented when v >= T, where T is the level of the
+ * tile the pixel lies in. The level is either one fixed value or an automatic
+ * level per tile computed from the frame's own statistics:
+ *
+ *   level = background(tile) + max(k_sigma * noise_sigma, min_contrast)
+ *
+ *  - background: the median of a sparse sample of the tile (every
+ *    sample_step_px-th pixel of every sample_step_px-th row); a tile whose
+ *    median lies more than a quarter of the contrast above the median of its
+ *    3x3 neighbourhood of tiles takes that instead (a bright spot covering
+ *    most of a tile does not raise the tile's level); then raised to the
+ *    largest value that the bilinear interpolation between tile centres
+ *    takes inside the tile (an ambient gradient does not eat the margin at
+ *    the bright side of a tile);
+ *  - noise_sigma: one robust figure for the whole frame, from the median
+ *    absolute difference of horizontally adjacent pixels at the sample points,
+ *    sigma = 1.4826 * MAD / sqrt(2) (a difference has sqrt(2) the noise of a
+ *    pixel; gradients cancel in the difference, spots are outliers). The
+ *    median is interpolated within its histogram bin, so noise below one
+ *    level is still measured (pixel quantisation adds 1/12 level^2).
+ *
+ * The arithmetic on levels is fixed point (algo/fixed_point.h). The sample
+ * reads about 1/sample_step_px^2 of the pixels (1/256 by default: 16
+ * samples in a 64-pixel tile, a tile median good to about 0.3 sigma, and
+ * some 6000 pixel pairs for the noise of a 1456 x 1088 frame).
+ *
+ * Units: levels of the 8-bit frame; pixels.
+ */
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "algo/capacities.h"
+#include "algo/fixed_point.h"
+#include "algo/image.h"
+
+namespace dockpose {
+
+enum class ThresholdMode : std::uint8_t {
+	Fixed = 0, /* one level for the whole frame: fixed_level */
+	Auto, /* per tile, from background and noise */
+};
+
+struct ThresholdConfig {
+	using Mode = ThresholdMode;
+
+	Mode mode = Mode::Auto;
+	/* Fixed: pixels >= fixed_level are segmented, 0..255. */
+	int fixed_level = 100;
+	/* Auto: level = background + max(k_sigma * noise_sigma, min_contrast). */
+	double k_sigma = 6.0; /* 0..255, used as UQ8_8 */
+	int min_contrast = 12; /* levels, 0..255 */
+	/*
+	 * Auto: tile side (8..kMaxFrameSide) and sampling step (1..tile_px / 4,
+	 * so a tile has at least 4 x 4 samples), pixels. The step is raised when
+	 * a tile would have more than 64 x 64 samples.
+	 */
+	int tile_px = 64;
+	int sample_step_px = 16;
+};
+
+struct ThresholdStats {
+	int level_min = 0; /* smallest and largest tile level of the frame */
+	int level_max = 0;
+	double background = 0.0; /* mean of the tile backgrounds, levels (Auto only, else 0) */
+	double noise_sigma = 0.0; /* robust noise estimate, levels (Auto only, else 0) */
+	int tiles_x = 0; /* the tile grid */
+	int tiles_y = 0;
+	bool valid = false; /* false: invalid view or frame larger than the Thresholder's */
+};
+
+/*
+ * Per-tile levels. Tile (c, r) covers pixels x in [c * tile_px, (c + 1) * tile_px)
+ * and y in [r * tile_px, (r + 1) * tile_px); pixels beyond the grid take the
+ * level of the last column / row, so a map answers for any pixel.
+ */
+class ThresholdMap
+{
+public:
+	/* No tiles: every pixel reads level 255 (or what setUniform() set). Allocates: never. */
+	ThresholdMap() = default;
+
+	/*
+	 * A grid of ceil(width / tile_px) x ceil(height / tile_px) tiles, all at
+	 * `level`. Allocates: here (the grid).
+	 */
+	ThresholdMap(int width, int height, int tile_px, std::uint8_t level = 255);
+
+	/* One tile, `level` everywhere. Allocates: here (one byte). */
+	static ThresholdMap uniform(std::uint8_t level);
+
+	/* Turn this map into one tile at `level`, keeping its storage. Allocates: never. */
+	void setUniform(std::uint8_t level);
+
+	/*
+	 * Re-grid for a width x height frame with tiles of tile_px, within the
+	 * storage allocated at construction (levels unspecified until set).
+	 * Returns false, leaving the map unchanged, when the grid does not fit.
+	 * Allocates: never.
+	 */
+	bool reshape(int width, int height, int tile_px);
+
+	void fill(std::uint8_t level);
+
+	int tilePx() const { return tile_px_; }
+	int cols() const { return cols_; }
+	int rows() const { return rows_; }
+	/* Tiles the storage holds. */
+	int capacity() const { return static_cast<int>(levels_.size()); }
+
+	std::uint8_t level(int col, int row) const { return levels_[index(col, row)]; }
+	void setLevel(int col, int row, std::uint8_t level) { levels_[index(col, row)] = level; }
+
+	/* The cols() levels of tile row `row` (row in [0, rows())). */
+	const std::uint8_t *rowLevels(int row) const
+	{
+		return levels_.data() + static_cast<std::size_t>(row) * cols_;
+	}
+
+	/* Level of pixel (x, y), x, y >= 0. */
+	std::uint8_t levelAt(int x, int y) const
+	{
+		if (cols_ == 0)
+			return empty_level_;
+		int c = x / tile_px_;
+		int r = y / tile_px_;
+		c = c < cols_ ? c : cols_ - 1;
+		r = r < rows_ ? r : rows_ - 1;
+		return levels_[index(c, r)];
+	}
+
+private:
+	std::size_t index(int col, int row) const
+	{
+		return static_cast<std::size_t>(row) * static_cast<std::size_t>(cols_) +
+		       static_cast<std::size_t>(col);
+	}
+
+	int tile_px_ = kMaxFrameSide;
+	int cols_ = 0;
+	int rows_ = 0;
+	std::uint8_t empty_level_ = 255; /* the level of a map without tiles */
+	std::vector<std::uint8_t> levels_;
+};
+
+class Thresholder
+{
+public:
+	/*
+	 * For frames up to max_width x max_height. Out-of-range configuration
+	 * values are clamped (see ThresholdConfig). Allocates: here only.
+	 */
+	Thresholder(int max_width, int max_height, const ThresholdConfig &config);
+
+	/*
+	 * The level map of one frame. An invalid view or a frame larger than the
+	 * constructor's size gives a uniform map at 255 with stats->valid false.
+	 * stats may be null. The map stays valid until the next call.
+	 * Allocates: never.
+	 */
+	const ThresholdMap &compute(const ImageView &image, ThresholdStats *stats = nullptr);
+
+	const ThresholdMap &map() const { return map_; }
+	const ThresholdConfig &config() const { return config_; }
+	int maxWidth() const { return max_width_; }
+	int maxHeight() const { return max_height_; }
+
+private:
+	void computeAuto(const ImageView &image, ThresholdStats *stats);
+	/* Tile medians (medians_) and the difference histogram from the sparse sample. */
+	void sampleTiles(const ImageView &image, int cols, int rows);
+	/* Robust noise sigma from the difference histogram, levels. */
+	UQ16_16 noiseSigma() const;
+
+	ThresholdConfig config_;
+	int max_width_ = 0;
+	int max_height_ = 0;
+	int tile_px_ = 64;
+	int step_px_ = 8;
+	UQ8_8 k_sigma_;
+	UQ16_16 min_contrast_;
+
+	ThresholdMap map_;
+	/* Sample positions of the current frame's tile columns / rows. */
+	std::vector<int> col_start_, col_count_, row_start_, row_count_;
+	/* One histogram and the minimum sample per tile column of the current tile row. */
+	std::vector<std::uint16_t> hist_;
+	std::vector<std::uint8_t> col_min_;
+	/* Tile medians; guarded backgrounds padded by one tile; corner sums of four tiles. */
+	std::vector<std::uint8_t> medians_;
+	std::vector<std::int32_t> padded_;
+	std::vector<std::int32_t> corners_;
+	/* Histograms of absolute differences (4 banks to break store dependencies). */
+	std::array<std::array<std::uint32_t, 256>, 4> diff_hist_{};
+};
+
+} /* namespace dockpose */
