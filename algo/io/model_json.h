@@ -1,0 +1,64 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Target model and camera intrinsics from JSON files (method.md section 3).
+ *
+ * Target:  { "name": "wedge", "units": "mm",
+ *            "points": [[x, y, z], ...],        LED centres in the target frame, mm
+ *            "faces": [[i, j, k, l], ...] }      convex planar quads, cyclic order
+ *   "name" is optional (default: the file's stem), "units" is optional but
+ *   must be "mm" when present. At most kMaxLeds points and kMaxFaces faces.
+ *
+ * Camera:  { "width": W, "height": H, "fx": .., "fy": .., "cx": .., "cy": ..,
+ *            "k1": .., "k2": .., "p1": .., "p2": .. }
+ *   width/height are integers (pixels); fx, fy, cx, cy in pixels are required;
+ *   the distortion coefficients default to 0 when absent. A non-zero "k3"
+ *   (or higher) is refused: dockpose's lens model has k1, k2, p1, p2 only.
+ *
+ * Unknown keys are ignored. Nothing here throws: every failure comes back as
+ * an error sentence that names the file (or "<text>") and the problem.
+ *
+ * Host and start-up only. Allocates: yes (strings, the parsed document).
+ */
+#pragma once
+
+#include <string>
+
+#include "algo/camera_model.h"
+#include "algo/target_model.h"
+
+namespace dockpose {
+
+/* A value or the reason there is none. */
+template<typename T>
+struct LoadResult {
+	T value{};
+	std::string error; /* empty on success */
+
+	bool ok() const { return error.empty(); }
+	explicit operator bool() const { return ok(); }
+};
+
+/*
+ * Parse a target model from JSON text. `source` names the text in error
+ * messages (a path, or "<text>"); it also gives the default name.
+ */
+LoadResult<TargetModel> parseTargetModel(const std::string &json_text,
+					 const std::string &source = "<text>");
+
+/* Read and parse a target model file. */
+LoadResult<TargetModel> loadTargetModel(const std::string &path);
+
+/* Parse camera intrinsics from JSON text; `source` as above. */
+LoadResult<CameraIntrinsics> parseCameraIntrinsics(const std::string &json_text,
+						   const std::string &source = "<text>");
+
+/* Read and parse a camera file. */
+LoadResult<CameraIntrinsics> loadCameraIntrinsics(const std::string &path);
+
+/*
+ * Read a whole file into *contents. Returns an empty string on success, else
+ * "<path>: <reason>". Used by the loaders above and by the PGM reader.
+ */
+std::string readFileContents(const std::string &path, std::string *contents);
+
+} /* namespace dockpose */
