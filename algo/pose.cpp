@@ -395,7 +395,9 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 			}
 			const Pose candidate = applyStep(pose, delta);
 			Evaluation next;
-			if (evaluate(camera, model_mm, pixels, n, candidate, true, &next) && next.sse < ev.sse) {
+			/* Trial steps need only the error; the jacobian only once a step is taken. */
+			if (evaluate(camera, model_mm, pixels, n, candidate, false, &next) && next.sse < ev.sse &&
+			    evaluate(camera, model_mm, pixels, n, candidate, true, &next)) {
 				const double decrease = ev.sse - next.sse;
 				const bool small_step = delta.head<3>().norm() <= 1e-10 * (1.0 + pose.t_mm.norm()) &&
 							delta.tail<3>().norm() <= 1e-12;
@@ -403,7 +405,8 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 				ev = next;
 				lambda = std::max(lambda * 0.2, 1e-9);
 				accepted = true;
-				if (small_step || decrease <= 1e-12 * ev.sse)
+				/* A relative decrease of 1e-9 moves the pose by far less than its uncertainty. */
+				if (small_step || decrease <= 1e-9 * ev.sse)
 					converged = true;
 			} else {
 				lambda *= 10.0;
@@ -422,6 +425,8 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 	result->converged = converged;
 	result->rms_px = std::sqrt(ev.sse / n);
 	result->max_px = ev.max_px;
+	if (!options.covariance)
+		return true;
 
 	/*
 	 * Covariance sigma^2 (J^T J)^-1, inverted after Jacobi scaling (the

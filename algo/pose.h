@@ -73,6 +73,8 @@ struct RefineOptions {
 	int max_iterations = 20;
 	/* Pixel noise of one centroid, used as the floor of the covariance's sigma. */
 	double sigma_px = 0.15;
+	/* Compute the covariance (skipped for internal screening steps). */
+	bool covariance = true;
 };
 
 struct RefineResult {

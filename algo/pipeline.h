@@ -1,0 +1,91 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The frame path: one 8-bit frame in, one PoseResult out.
+ *
+ * Pipeline owns every buffer, sized at construction from the camera and the
+ * target model; process() never allocates (proved by tests/algo/test_no_alloc).
+ */
+#pragma once
+
+#include <cstdint>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "algo/blob_detector.h"
+#include "algo/camera_model.h"
+#include "algo/correspondence.h"
+#include "algo/pose.h"
+#include "algo/target_model.h"
+
+namespace dockpose {
+
+enum class PoseStatus : std::uint8_t {
+	Found = 0,
+	NoFrame,	  /* invalid view or wrong size */
+	TooCluttered,	  /* component overflow */
+	TooFewBlobs,	  /* fewer than 4 candidates */
+	NoMatch,	  /* no hypothesis passed verification */
+	Ambiguous,	  /* two different poses explain the image equally well */
+	RefineFailed,	  /* refinement diverged or left a large error */
+};
+
+const char *poseStatusName(PoseStatus status);
+
+struct PoseResult {
+	bool found = false;
+	PoseStatus status = PoseStatus::NoFrame;
+	Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+	Eigen::Vector3d t_mm = Eigen::Vector3d::Zero();
+	Eigen::Quaterniond q = Eigen::Quaterniond::Identity(); /* w >= 0 */
+	Eigen::Vector3d rpy_deg = Eigen::Vector3d::Zero();     /* roll, pan, tilt */
+	double rms_px = 0.0;
+	int leds_used = 0;
+	std::uint32_t led_mask = 0; /* bit i: model LED i matched */
+	Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
+	Eigen::Vector3d sigma_t_mm = Eigen::Vector3d::Zero();
+	Eigen::Vector3d sigma_rpy_deg = Eigen::Vector3d::Zero();
+	bool tracked = false; /* found by the tracking path (prediction from the last pose) */
+	int blobs = 0;	      /* candidates after the shape filter */
+	int hypotheses = 0;   /* hypotheses scored */
+	BlobStats blob_stats;
+};
+
+struct PipelineConfig {
+	ThresholdConfig threshold;
+	BlobFilterConfig blob_filter;
+	CorrespondenceConfig correspondence;
+	RefineOptions refine;
+	bool tracking = true; /* predict from the last pose, full search when lost */
+};
+
+class Pipeline
+{
+public:
+	/* Allocates: here, every buffer the frame path needs. */
+	Pipeline(const TargetModel &target, const CameraIntrinsics &camera, const PipelineConfig &config = {});
+
+	/* One frame -> one pose. Allocates: never. */
+	const PoseResult &process(const ImageView &frame);
+
+	/* Forget the tracked pose (next frame runs the full search). */
+	void reset();
+
+	const CameraModel &camera() const { return camera_; }
+	const TargetModel &target() const { return target_; }
+	const StaticVector<Blob, kMaxCandidates> &blobs() const { return blobs_; }
+	const PoseResult &last() const { return result_; }
+
+private:
+	TargetModel target_;
+	CameraModel camera_;
+	PipelineConfig config_;
+	BlobDetector detector_;
+	Correspondence correspondence_;
+	StaticVector<Blob, kMaxCandidates> blobs_;
+	PoseResult result_;
+	bool have_track_ = false;
+	Pose track_pose_;
+};
+
+} /* namespace dockpose */
