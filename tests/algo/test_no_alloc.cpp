@@ -1,0 +1,203 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Proof that the frame path never touches the heap: global operator new /
+ * delete and malloc / calloc / realloc are counted, and this executable is
+ * compiled (all of algo included) with EIGEN_RUNTIME_NO_MALLOC so that any
+ * Eigen heap allocation asserts. Frames are rendered up front; then the
+ * pipeline runs in steady state — tracking, full search after reset(), lost
+ * target, cluttered and empty frames — with the counters armed.
+ */
+#ifndef EIGEN_RUNTIME_NO_MALLOC
+#error "test_no_alloc must be compiled with EIGEN_RUNTIME_NO_MALLOC"
+#endif
+
+/* The replacement operator delete frees what the replacement operator new took from malloc. */
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <new>
+#include <vector>
+
+#include <dlfcn.h>
+
+#include <gtest/gtest.h>
+
+#include "algo/pipeline.h"
+#include "algo/synth/renderer.h"
+
+namespace {
+
+std::atomic<long> g_allocations{ 0 };
+std::atomic<bool> g_armed{ false };
+
+void count()
+{
+	if (g_armed.load(std::memory_order_relaxed))
+		g_allocations.fetch_add(1, std::memory_order_relaxed);
+}
+
+} /* namespace */
+
+extern "C" void *__libc_malloc(std::size_t);
+
+/* Counting hooks: operator new and friends take memory from the C library directly. */
+void *operator new(std::size_t n)
+{
+	count();
+	if (void *p = __libc_malloc(n ? n : 1))
+		return p;
+	throw std::bad_alloc();
+}
+void *operator new[](std::size_t n)
+{
+	count();
+	if (void *p = __libc_malloc(n ? n : 1))
+		return p;
+	throw std::bad_alloc();
+}
+void *operator new(std::size_t n, std::align_val_t a)
+{
+	count();
+	if (void *p = std::aligned_alloc(static_cast<std::size_t>(a), (n + static_cast<std::size_t>(a) - 1) &
+									      ~(static_cast<std::size_t>(a) - 1)))
+		return p;
+	throw std::bad_alloc();
+}
+void operator delete(void *p) noexcept { std::free(p); }
+void operator delete[](void *p) noexcept { std::free(p); }
+void operator delete(void *p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void *p, std::size_t) noexcept { std::free(p); }
+void operator delete(void *p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void *p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+
+/* malloc family: interpose and forward to the C library's implementation. */
+extern "C" {
+extern void *__libc_calloc(std::size_t, std::size_t);
+extern void *__libc_realloc(void *, std::size_t);
+
+void *malloc(std::size_t n)
+{
+	count();
+	return __libc_malloc(n);
+}
+void *calloc(std::size_t n, std::size_t m)
+{
+	count();
+	return __libc_calloc(n, m);
+}
+void *realloc(void *p, std::size_t n)
+{
+	count();
+	return __libc_realloc(p, n);
+}
+}
+
+using namespace dockpose;
+
+namespace {
+
+TargetModel wedge()
+{
+	TargetModel m;
+	m.name = "wedge";
+	for (const auto &p : { Eigen::Vector3d(-89, -38, 0), Eigen::Vector3d(-89, 38, 0), Eigen::Vector3d(0, 38, -40),
+			       Eigen::Vector3d(0, -38, -40), Eigen::Vector3d(89, -38, 0), Eigen::Vector3d(89, 38, 0) })
+		m.points_mm.push_back(p);
+	m.faces.push_back({ 0, 1, 2, 3 });
+	m.faces.push_back({ 3, 2, 5, 4 });
+	return m;
+}
+
+CameraIntrinsics camera()
+{
+	CameraIntrinsics k;
+	k.width = 1456;
+	k.height = 1088;
+	k.fx = k.fy = 1739.0;
+	k.cx = 727.5;
+	k.cy = 543.5;
+	k.k1 = -0.12;
+	k.k2 = 0.03;
+	return k;
+}
+
+/* Run `frames` through the pipeline with the counters armed; return allocations. */
+long allocationsWhile(Pipeline &pipeline, const std::vector<Image> &frames, bool reset_each, int *found)
+{
+	*found = 0;
+	g_allocations = 0;
+	Eigen::internal::set_is_malloc_allowed(false);
+	g_armed = true;
+	for (const Image &frame : frames) {
+		if (reset_each)
+			pipeline.reset();
+		*found += pipeline.process(frame.view()).found ? 1 : 0;
+	}
+	g_armed = false;
+	Eigen::internal::set_is_malloc_allowed(true);
+	return g_allocations.load();
+}
+
+} /* namespace */
+
+TEST(NoAlloc, CountingHooksWork)
+{
+	g_allocations = 0;
+	g_armed = true;
+	auto *p = new int(3);
+	void *q = std::malloc(16);
+	g_armed = false;
+	delete p;
+	std::free(q);
+	EXPECT_EQ(g_allocations.load(), 2);
+}
+
+TEST(NoAlloc, PipelineSteadyState)
+{
+	const TargetModel target = wedge();
+	const CameraIntrinsics cam = camera();
+	FrameRenderer renderer(target, cam);
+
+	/* A docking approach with clutter, a hidden LED, a lost target and an empty frame. */
+	std::vector<Image> frames;
+	for (int i = 0; i < 24; ++i) {
+		RenderOptions o;
+		o.reflections = (i % 4 == 1) ? 6 : 0;
+		o.glints = (i % 4 == 2) ? 2 : 0;
+		o.hot_pixels = 20;
+		o.occlusion_mask = (i % 6 == 3) ? 0b000100u : 0u;
+		Image img;
+		const double range = 1800.0 - 60.0 * i;
+		renderer.render(poseAt(cam, target, range, { 5.0, 10.0 - i, 3.0 }), o, 100 + i, &img);
+		frames.push_back(std::move(img));
+	}
+	frames.emplace_back(cam.width, cam.height, 10); /* nothing in view */
+	{
+		RenderOptions o;
+		o.occlusion_mask = 0b111111u;
+		o.reflections = 10;
+		Image img;
+		renderer.render(poseAt(cam, target, 900.0, { 0, 0, 0 }), o, 7, &img);
+		frames.push_back(std::move(img));
+	}
+
+	Pipeline pipeline(target, cam);
+	int found = 0;
+	/* Warm-up: one pass of everything (first-touch of every buffer). */
+	for (const Image &f : frames)
+		pipeline.process(f.view());
+	pipeline.reset();
+
+	EXPECT_EQ(allocationsWhile(pipeline, frames, false, &found), 0) << "tracking";
+	EXPECT_GE(found, 20);
+	EXPECT_EQ(allocationsWhile(pipeline, frames, true, &found), 0) << "full search every frame";
+	EXPECT_GE(found, 20);
+}
+
+int main(int argc, char **argv)
+{
+	::testing::InitGoogleTest(&argc, argv);
+	return RUN_ALL_TESTS();
+}
