@@ -434,16 +434,11 @@ bool Correspondence::planarFlipExplains(const Hypothesis &h) const
 		n = (target_.points_mm[h.match.pairs[i][0]] - a).cross(target_.points_mm[h.match.pairs[i + 1][0]] - a);
 	if (n.norm() < 1e-9)
 		return true;
-	const Eigen::Vector3d c = pose.apply(centre);
-	const Eigen::Vector3d v = c.normalized();
+	const Eigen::Vector3d v = pose.apply(centre).normalized();
 	const Eigen::Vector3d nc = (pose.R * n).normalized();
-	const Eigen::Vector3d mirrored = 2.0 * nc.dot(v) * v - nc;
-	const Eigen::Quaterniond flip = Eigen::Quaterniond::FromTwoVectors(nc, mirrored);
-	if (std::abs(flip.w()) > std::cos(0.25 * kPi / 180.0)) /* head-on: the two minima coincide */
+	if (std::abs(nc.dot(v)) > std::cos(0.25 * kPi / 180.0)) /* head-on: the two minima coincide */
 		return false;
-	Pose start;
-	start.R = flip.toRotationMatrix() * pose.R;
-	start.t_mm = c - flip.toRotationMatrix() * (c - pose.t_mm);
+	const Pose start = mirrorPose(pose, centre, n.normalized());
 	Hypothesis other;
 	other.match = h.match;
 	if (!refineMatched(start, &other, false))
@@ -581,41 +576,72 @@ bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vect
 	Pose pose;
 	if (!solveFourCoplanar(model, q, &pose))
 		return false;
-	if (virtual_k >= 0) {
-		/*
-		 * Cheap test first: the rough pose must already put at least one
-		 * other LED near a blob (within half the face's size).
-		 */
-		if (!plausible(pose))
-			return false;
-		Match rough;
-		const double face_px = camera_.intrinsics().fx * (model[0] - model[2]).norm() /
-				       std::max(pose.apply(model[0]).z(), 1.0);
-		if (matchPredicted(pose, std::max(gatePx(pose), 0.5 * face_px), &rough) < minLeds(false) - 1)
-			return false;
-		/*
-		 * The affine guess of the hidden vertex is only approximate under
-		 * perspective: take the three real points exactly (three points,
-		 * six unknowns) from the closed form's pose as the start.
-		 */
-		Eigen::Vector3d model3[3];
-		Eigen::Vector2d px3[3];
-		for (int k = 0, n = 0; k < 4; ++k)
-			if (k != virtual_k) {
-				model3[n] = model[k];
-				px3[n++] = uv[k];
-			}
-		RefineOptions quick = config_.refine;
-		quick.max_iterations = 8;
-		quick.covariance = false;
+	if (virtual_k < 0)
+		return verify(pose, f, model, uv, virtual_k);
+
+	/*
+	 * Cheap test first: the rough pose must already put at least one other
+	 * LED near a blob (within half the face's size).
+	 */
+	if (!plausible(pose))
+		return false;
+	Match rough;
+	const double face_px = camera_.intrinsics().fx * (model[0] - model[2]).norm() /
+			       std::max(pose.apply(model[0]).z(), 1.0);
+	if (matchPredicted(pose, std::max(gatePx(pose), 0.5 * face_px), &rough) < minLeds(false) - 1)
+		return false;
+	/*
+	 * The affine guess of the hidden vertex is only approximate under
+	 * perspective: fit the three real points exactly (three points, six
+	 * unknowns). Three points have up to four such poses; start from the
+	 * closed form's pose and from its mirror about the line of sight, the
+	 * two a small face is most often confused between.
+	 */
+	Eigen::Vector3d model3[3];
+	Eigen::Vector2d px3[3];
+	for (int k = 0, n = 0; k < 4; ++k)
+		if (k != virtual_k) {
+			model3[n] = model[k];
+			px3[n++] = uv[k];
+		}
+	RefineOptions quick = config_.refine;
+	quick.max_iterations = 8;
+	quick.covariance = false;
+	const Pose starts[2] = { pose, mirrorPose(pose, face_centres_[f], normals_[f]) };
+	for (const Pose &start : starts) {
 		RefineResult exact;
-		if (!refinePose(camera_, model3, px3, 3, pose, quick, &exact))
-			return false;
-		pose = exact.pose;
+		if (refinePose(camera_, model3, px3, 3, start, quick, &exact) &&
+		    verify(exact.pose, f, model, uv, virtual_k))
+			return true;
 	}
+	return false;
+}
+
+/*
+ * The mirror of a pose about the line of sight to a plane through centre_t
+ * with normal normal_t (target frame): the plane tilted the other way, the
+ * second minimum of a planar set seen in perspective.
+ */
+Pose Correspondence::mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t, const Eigen::Vector3d &normal_t)
+{
+	const Eigen::Vector3d c = pose.apply(centre_t);
+	const Eigen::Vector3d v = c.normalized();
+	const Eigen::Vector3d nc = (pose.R * normal_t).normalized();
+	const Eigen::Vector3d mirrored = 2.0 * nc.dot(v) * v - nc;
+	const Eigen::Matrix3d flip = Eigen::Quaterniond::FromTwoVectors(nc, mirrored).toRotationMatrix();
+	Pose out;
+	out.R = flip * pose.R;
+	out.t_mm = c - flip * (c - pose.t_mm);
+	return out;
+}
+
+/* The checks every hypothesis pose goes through, then verification; true: stop the search. */
+bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4],
+			    const Eigen::Vector2d uv[4], int virtual_k)
+{
 	if (!faceVisible(pose, f) || !plausible(pose))
 		return false;
-	/* The closed form must reproject its own (real) points. */
+	/* The pose must reproject its own (real) points. */
 	const double gate = gatePx(pose);
 	for (int k = 0; k < 4; ++k) {
 		if (k == virtual_k)

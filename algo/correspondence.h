@@ -144,6 +144,9 @@ private:
 	int minLeds(bool tracking) const;
 	bool tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4], std::size_t f, const int vertex[4],
 			   int virtual_k);
+	bool verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4], const Eigen::Vector2d uv[4],
+		    int virtual_k);
+	static Pose mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t, const Eigen::Vector3d &normal_t);
 	bool searchQuads(const int *cand, int nc);
 	bool searchTriangles(const int *cand, int nc);
 	bool fullSearch(const Pose *reference, CorrespondenceResult *result);
