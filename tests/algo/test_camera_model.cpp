@@ -11,40 +11,14 @@
 #include <gtest/gtest.h>
 
 #include "algo/camera_model.h"
+#include "fixtures.h"
 
 using namespace dockpose;
 
 namespace {
 
-/* The paper's 512x512 camera (6 mm lens), no distortion. */
-CameraIntrinsics paperCamera()
-{
-	CameraIntrinsics k;
-	k.width = 512;
-	k.height = 512;
-	k.fx = 700.0;
-	k.fy = 702.0;
-	k.cx = 255.5;
-	k.cy = 255.5;
-	return k;
-}
-
-/* The 1456x1088 sensor with a real lens. */
-CameraIntrinsics distortedCamera()
-{
-	CameraIntrinsics k;
-	k.width = 1456;
-	k.height = 1088;
-	k.fx = 1739.0;
-	k.fy = 1739.0;
-	k.cx = 727.5;
-	k.cy = 543.5;
-	k.k1 = -0.12;
-	k.k2 = 0.03;
-	k.p1 = 0.001;
-	k.p2 = -0.0005;
-	return k;
-}
+using test::distortedCamera;
+using test::paperCamera;
 
 /* method.md section 2, written out independently of camera_model.cpp. */
 Eigen::Vector2d referenceDistort(const CameraIntrinsics &k, double x, double y)

@@ -12,22 +12,11 @@
 
 #include "algo/correspondence.h"
 #include "algo/pose.h"
+#include "fixtures.h"
 
 using namespace dockpose;
 
 namespace {
-
-TargetModel wedge()
-{
-	TargetModel m;
-	m.name = "wedge";
-	for (const auto &p : { Eigen::Vector3d(-89, -38, 0), Eigen::Vector3d(-89, 38, 0), Eigen::Vector3d(0, 38, -40),
-			       Eigen::Vector3d(0, -38, -40), Eigen::Vector3d(89, -38, 0), Eigen::Vector3d(89, 38, 0) })
-		m.points_mm.push_back(p);
-	m.faces.push_back({ 0, 1, 2, 3 });
-	m.faces.push_back({ 3, 2, 5, 4 });
-	return m;
-}
 
 /* Three faces around a box corner, the corner towards the camera (-z), no symmetry. */
 TargetModel corner()
@@ -52,19 +41,10 @@ TargetModel corner()
 	return m;
 }
 
+/* The 1456x1088 camera, with its own small tangential terms. */
 CameraIntrinsics cam1456()
 {
-	CameraIntrinsics k;
-	k.width = 1456;
-	k.height = 1088;
-	k.fx = k.fy = 1739.0;
-	k.cx = 727.5;
-	k.cy = 543.5;
-	k.k1 = -0.12;
-	k.k2 = 0.03;
-	k.p1 = 0.0005;
-	k.p2 = -0.0003;
-	return k;
+	return test::camera1456(0.0005, -0.0003);
 }
 
 Pose makePose(double roll, double pan, double tilt, double x, double y, double z)
@@ -131,7 +111,7 @@ void expectPose(const Pose &truth, const Pose &found, double rot_deg, double tra
 
 TEST(Correspondence, WedgeHasItsHalfTurnSymmetry)
 {
-	const TargetModel m = wedge();
+	const TargetModel m = test::wedgeModel();
 	Correspondence c(m, CameraModel(cam1456()), {});
 	ASSERT_EQ(c.symmetries().size(), 2u);
 	const auto &s = c.symmetries()[1];
@@ -151,7 +131,7 @@ TEST(Correspondence, FindsPoseWithClutterAndHiddenLed)
 {
 	std::mt19937 rng(7);
 	const CameraModel cam(cam1456());
-	for (const TargetModel &m : { wedge(), corner() }) {
+	for (const TargetModel &m : { test::wedgeModel(), corner() }) {
 		Correspondence c(m, cam, {});
 		int found = 0, trials = 0;
 		std::uniform_real_distribution<double> ang(-25, 25), range(300, 2000), lat(-0.2, 0.2);
@@ -176,7 +156,7 @@ TEST(Correspondence, ReportsTheSymmetricPoseNearestTheModelOrientation)
 {
 	std::mt19937 rng(3);
 	const CameraModel cam(cam1456());
-	const TargetModel m = wedge();
+	const TargetModel m = test::wedgeModel();
 	Correspondence c(m, cam, {});
 	/* Rolled by 150 degrees about the optical axis the wedge looks like it is rolled by -30. */
 	const Pose truth = makePose(0, 0, 150, 20, -10, 900);
@@ -218,7 +198,7 @@ TEST(Correspondence, RandomPointsGiveNoPose)
 {
 	std::mt19937 rng(5);
 	const CameraModel cam(cam1456());
-	for (const TargetModel &m : { wedge(), corner() }) {
+	for (const TargetModel &m : { test::wedgeModel(), corner() }) {
 		Correspondence c(m, cam, {});
 		for (int t = 0; t < 40; ++t) {
 			auto blobs = observe(m, cam, makePose(0, 0, 0, 0, 0, 1000), 0x7f, 12, 0.0, rng);
@@ -232,7 +212,7 @@ TEST(Correspondence, TooFewPointsGiveNoPose)
 {
 	std::mt19937 rng(1);
 	const CameraModel cam(cam1456());
-	const TargetModel m = wedge();
+	const TargetModel m = test::wedgeModel();
 	Correspondence c(m, cam, {});
 	/* Only three LEDs visible. */
 	auto blobs = observe(m, cam, makePose(0, 0, 0, 0, 0, 800), 0b111000, 0, 0.05, rng);

@@ -26,6 +26,7 @@
 
 #include "algo/pipeline.h"
 #include "algo/synth/renderer.h"
+#include "fixtures.h"
 
 namespace {
 
@@ -98,31 +99,6 @@ using namespace dockpose;
 
 namespace {
 
-TargetModel wedge()
-{
-	TargetModel m;
-	m.name = "wedge";
-	for (const auto &p : { Eigen::Vector3d(-89, -38, 0), Eigen::Vector3d(-89, 38, 0), Eigen::Vector3d(0, 38, -40),
-			       Eigen::Vector3d(0, -38, -40), Eigen::Vector3d(89, -38, 0), Eigen::Vector3d(89, 38, 0) })
-		m.points_mm.push_back(p);
-	m.faces.push_back({ 0, 1, 2, 3 });
-	m.faces.push_back({ 3, 2, 5, 4 });
-	return m;
-}
-
-CameraIntrinsics camera()
-{
-	CameraIntrinsics k;
-	k.width = 1456;
-	k.height = 1088;
-	k.fx = k.fy = 1739.0;
-	k.cx = 727.5;
-	k.cy = 543.5;
-	k.k1 = -0.12;
-	k.k2 = 0.03;
-	return k;
-}
-
 /* Run `frames` through the pipeline with the counters armed; return allocations. */
 long allocationsWhile(Pipeline &pipeline, const std::vector<Image> &frames, bool reset_each, int *found)
 {
@@ -156,8 +132,8 @@ TEST(NoAlloc, CountingHooksWork)
 
 TEST(NoAlloc, PipelineSteadyState)
 {
-	const TargetModel target = wedge();
-	const CameraIntrinsics cam = camera();
+	const TargetModel target = test::wedgeModel();
+	const CameraIntrinsics cam = test::camera1456(); /* radial distortion only */
 	FrameRenderer renderer(target, cam);
 
 	/* A docking approach with clutter, a hidden LED, a lost target and an empty frame. */

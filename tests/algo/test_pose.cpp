@@ -17,6 +17,7 @@
 
 #include "algo/camera_model.h"
 #include "algo/pose.h"
+#include "fixtures.h"
 
 using namespace dockpose;
 
@@ -78,25 +79,10 @@ double angleRad(const Eigen::Matrix3d &a, const Eigen::Matrix3d &b)
 	return Eigen::AngleAxisd(a.transpose() * b).angle();
 }
 
-CameraIntrinsics distortedCamera()
-{
-	CameraIntrinsics k;
-	k.width = 1456;
-	k.height = 1088;
-	k.fx = 1739.0;
-	k.fy = 1739.0;
-	k.cx = 727.5;
-	k.cy = 543.5;
-	k.k1 = -0.12;
-	k.k2 = 0.03;
-	k.p1 = 0.001;
-	k.p2 = -0.0005;
-	return k;
-}
+using test::distortedCamera;
 
 /* The wedge of method.md section 3. */
-const Eigen::Vector3d kWedge[6] = { { -89, -38, 0 }, { -89, 38, 0 }, { 0, 38, -40 },
-				    { 0, -38, -40 }, { 89, -38, 0 }, { 89, 38, 0 } };
+const TargetModel kWedge = test::wedgeModel();
 
 /*
  * A random convex quadrilateral: four points on an ellipse at increasing
@@ -322,15 +308,14 @@ TEST(SolveFourCoplanar, WedgeFacesAtWorkingRanges)
 	std::mt19937 rng(11);
 	std::uniform_real_distribution<double> ang(-40.0, 40.0);
 	std::uniform_real_distribution<double> range(150.0, 2100.0);
-	const int faces[2][4] = { { 0, 1, 2, 3 }, { 3, 2, 5, 4 } };
 	for (int trial = 0; trial < 200; ++trial) {
 		Pose truth;
 		truth.R = rotationFromRollPanTiltDeg({ ang(rng), ang(rng), ang(rng) });
 		truth.t_mm = { 0.05 * ang(rng), 0.05 * ang(rng), range(rng) };
-		for (const auto &f : faces) {
+		for (const auto &f : kWedge.faces) {
 			Eigen::Vector3d quad[4];
 			for (int i = 0; i < 4; ++i)
-				quad[i] = kWedge[f[i]];
+				quad[i] = kWedge.points_mm[f[i]];
 			Eigen::Vector2d xy[4];
 			projectIdeal(truth, quad, 4, xy);
 			Pose pose;
@@ -428,7 +413,7 @@ TEST(SolveFourCoplanar, DegradesGracefullyWithNoise)
 	for (int trial = 0; trial < 300; ++trial) {
 		Eigen::Vector3d quad[4];
 		for (int i = 0; i < 4; ++i)
-			quad[i] = kWedge[i];
+			quad[i] = kWedge.points_mm[i];
 		Pose truth;
 		truth.R = rotationFromRollPanTiltDeg({ 10.0, 20.0, -5.0 });
 		truth.t_mm = { 30, -20, 600 };
@@ -578,7 +563,7 @@ Scene wedgeScene()
 {
 	Scene s;
 	for (int i = 0; i < 6; ++i)
-		s.model[i] = kWedge[i];
+		s.model[i] = kWedge.points_mm[i];
 	s.model[6] = { -44.5, 0.0, -20.0 };
 	s.model[7] = { 44.5, 20.0, -20.0 };
 	return s;

@@ -22,38 +22,14 @@
 
 #include "algo/camera_model.h"
 #include "algo/pose.h"
+#include "fixtures.h"
 
 using namespace dockpose;
 
 namespace {
 
-CameraIntrinsics paperCamera()
-{
-	CameraIntrinsics k;
-	k.width = 512;
-	k.height = 512;
-	k.fx = 700.0;
-	k.fy = 702.0;
-	k.cx = 255.5;
-	k.cy = 255.5;
-	return k;
-}
-
-CameraIntrinsics distortedCamera()
-{
-	CameraIntrinsics k;
-	k.width = 1456;
-	k.height = 1088;
-	k.fx = 1739.0;
-	k.fy = 1739.0;
-	k.cx = 727.5;
-	k.cy = 543.5;
-	k.k1 = -0.12;
-	k.k2 = 0.03;
-	k.p1 = 0.001;
-	k.p2 = -0.0005;
-	return k;
-}
+using test::distortedCamera;
+using test::paperCamera;
 
 cv::Matx33d cvCameraMatrix(const CameraIntrinsics &k)
 {
@@ -74,9 +50,8 @@ struct Target {
 /* The wedge of method.md section 3. */
 Target wedge()
 {
-	return { "wedge",
-		 { { -89, -38, 0 }, { -89, 38, 0 }, { 0, 38, -40 }, { 0, -38, -40 }, { 89, -38, 0 }, { 89, 38, 0 } },
-		 { { 0, 1, 2, 3 }, { 3, 2, 5, 4 } } };
+	const TargetModel m = test::wedgeModel();
+	return { "wedge", { m.points_mm.begin(), m.points_mm.end() }, { m.faces.begin(), m.faces.end() } };
 }
 
 /* A wedge with a flat top: 8 LEDs, three faces. */
