@@ -295,42 +295,14 @@ Eigen::Vector3d centroidOf(const TargetModel &target)
 } /* namespace */
 
 /*
- * Face fronts: each face's normal points away from the centroid of all LEDs.
- * A face whose plane holds the centroid (a flat target) has no outside; its
- * front is the side facing a camera at the identity pose (-z). When every
- * face would then point away from such a camera (+z), the target is concave
- * towards its nominal viewer (a funnel) and all fronts are flipped.
+ * Face fronts: the same definition the solver uses (TargetModel::frontNormals),
+ * so the truth and the correspondence agree on which LEDs can be seen.
  */
 FrameRenderer::FrameRenderer(const TargetModel &target, const CameraIntrinsics &camera)
 	: target_(target),
 	  camera_(camera)
 {
-	const Eigen::Vector3d centroid = centroidOf(target_);
-	const double diameter = std::max(target_.diameterMm(), 1e-9);
-	bool all_away = !target_.faces.empty();
-	for (const auto &face : target_.faces) {
-		const Eigen::Vector3d &p0 = target_.points_mm[face[0]],
-				      &p1 = target_.points_mm[face[1]];
-		const Eigen::Vector3d &p2 = target_.points_mm[face[2]],
-				      &p3 = target_.points_mm[face[3]];
-		Eigen::Vector3d n = (p2 - p0).cross(p3 - p1);
-		n = n.norm() > 0.0 ? Eigen::Vector3d(n.normalized())
-				   : Eigen::Vector3d(0.0, 0.0, -1.0);
-		const Eigen::Vector3d centre = (p0 + p1 + p2 + p3) / 4.0;
-		const double side = n.dot(centre - centroid);
-		if (std::abs(side) > 1e-6 * diameter) {
-			if (side < 0.0)
-				n = -n;
-		} else if (n.z() > 0.0 || (n.z() == 0.0 && n.y() > 0.0)) {
-			n = -n;
-		}
-		if (n.z() <= 0.0)
-			all_away = false;
-		normals_.push_back(n);
-	}
-	if (all_away)
-		for (auto &n : normals_)
-			n = -n;
+	target_.frontNormals(&normals_);
 }
 
 bool FrameRenderer::ledVisible(const Pose &pose, int led, double max_view_angle_deg) const

@@ -6,9 +6,8 @@
  * glints) and occlusion. Used by tests, the `dockpose render` tool and the
  * simulated camera. Deterministic for a given seed.
  *
- * Visibility: an LED shines into the half-space in front of its faces. The
- * front of a face is the side facing away from the centroid of all LEDs
- * (outward), unless the model's faces all point the other way; an LED is
+ * Visibility: an LED shines into the half-space in front of its faces (the
+ * fronts of TargetModel::frontNormals, shared with the solver); an LED is
  * visible when the camera sees at least one of its faces from the front
  * (viewing angle below max_view_angle_deg).
  *
@@ -76,7 +75,7 @@ public:
 	/* Whether LED i faces the camera at this pose (before occlusion). */
 	bool ledVisible(const Pose &pose, int led, double max_view_angle_deg) const;
 
-	/* Outward unit normal of face f (target frame), see the visibility rule above. */
+	/* Front unit normal of face f (target frame), see the visibility rule above. */
 	const Eigen::Vector3d &faceNormal(int f) const { return normals_[f]; }
 
 private:
