@@ -1,0 +1,646 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The dockpose CAN protocol: encoder and decoder of the frames a dockpose
+ * sensor sends (pose, status, heartbeat) and receives (command).
+ *
+ * The contract is firmware/protocol/dockpose.dbc; docs/can-protocol.md
+ * explains it. This header is shared with the arm controller: header-only,
+ * C++17 or later, the C++ standard library only, and it never allocates.
+ *
+ * Classic CAN, 11-bit identifiers, 8 data bytes, Intel (little-endian) signals.
+ * Identifier = base id + Offset; the DBC is written for base 0x300.
+ *
+ *   byte 6   AliveCounter (bits 48..51): per identifier, +1 mod 16 per frame
+ *            Sequence (bits 52..55): one value for all frames of one camera
+ *            frame's report (0 in heartbeat and command)
+ *   byte 7   CRC-8 SAE J1850 over [id & 0xff, (id >> 8) & 0x07, data[0..6]]
+ *
+ * A report is the five pose frames (only when the pose is valid) followed by
+ * the status frame; the status frame completes the report.
+ *
+ * Units: millimetres, degrees, pixels, milliseconds, hertz, microseconds, as
+ * in the field names. Threads: an Encoder or Decoder belongs to one thread.
+ */
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+
+namespace dockpose::can {
+
+constexpr std::uint32_t kDefaultBaseId = 0x300;
+/* The base id the DBC is written for: tools subtract (base - kDbcBaseId). */
+constexpr std::uint32_t kDbcBaseId = 0x300;
+/* base .. base + kCommand must stay 11-bit. */
+constexpr std::uint32_t kMaxBaseId = 0x7ff - 0x10;
+constexpr std::uint8_t kFrameLength = 8;
+/* Frames in a report with a pose: five pose frames and the status. */
+constexpr int kReportFrames = 6;
+
+constexpr bool validBaseId(std::uint32_t base_id)
+{
+	return base_id <= kMaxBaseId;
+}
+
+enum Offset : std::uint32_t {
+	kTranslation = 0x0,
+	kQuatA = 0x1,
+	kQuatB = 0x2,
+	kAngles = 0x3,
+	kSigma = 0x4,
+	kStatus = 0x5,
+	kHeartbeat = 0x6,
+	kCommand = 0x10,
+};
+
+enum class SensorState : std::uint8_t { Startup = 0, Searching, Tracking, Degraded, Fault, Shutdown };
+enum class StrobeMode : std::uint8_t { Off = 0, Constant = 1, Alternate = 2, Unchanged = 3 };
+enum class TrackMode : std::uint8_t { Track = 0, SearchOnly = 1 };
+
+/* The names are the DBC's value-table names. A decoded value outside the
+ * enumeration (State 6 or 7) is kept as it came and named "UNKNOWN". */
+inline const char *sensorStateName(SensorState state)
+{
+	switch (state) {
+	case SensorState::Startup: return "STARTUP";
+	case SensorState::Searching: return "SEARCHING";
+	case SensorState::Tracking: return "TRACKING";
+	case SensorState::Degraded: return "DEGRADED";
+	case SensorState::Fault: return "FAULT";
+	case SensorState::Shutdown: return "SHUTDOWN";
+	}
+	return "UNKNOWN";
+}
+
+inline const char *strobeModeName(StrobeMode mode)
+{
+	switch (mode) {
+	case StrobeMode::Off: return "OFF";
+	case StrobeMode::Constant: return "CONSTANT";
+	case StrobeMode::Alternate: return "ALTERNATE";
+	case StrobeMode::Unchanged: return "UNCHANGED";
+	}
+	return "UNKNOWN";
+}
+
+inline const char *trackModeName(TrackMode mode)
+{
+	switch (mode) {
+	case TrackMode::Track: return "TRACK";
+	case TrackMode::SearchOnly: return "SEARCH_ONLY";
+	}
+	return "UNKNOWN";
+}
+
+namespace fault {
+constexpr std::uint8_t kCameraStall = 1u << 0;
+constexpr std::uint8_t kCameraError = 1u << 1;
+constexpr std::uint8_t kStrobeError = 1u << 2;
+constexpr std::uint8_t kCanTxOverflow = 1u << 3;
+constexpr std::uint8_t kCanBusOff = 1u << 4;
+constexpr std::uint8_t kFramesDropped = 1u << 5;
+constexpr std::uint8_t kLoopOverrun = 1u << 6;
+constexpr std::uint8_t kCommandRejected = 1u << 7;
+} /* namespace fault */
+
+/* Name of fault bit `bit` (0..7), "CAMERA_STALL" etc.; "UNKNOWN" otherwise. */
+inline const char *faultBitName(unsigned int bit)
+{
+	static constexpr const char *kNames[8] = {
+		"CAMERA_STALL", "CAMERA_ERROR", "STROBE_ERROR", "CAN_TX_OVERFLOW",
+		"CAN_BUS_OFF", "FRAMES_DROPPED", "LOOP_OVERRUN", "COMMAND_REJECTED",
+	};
+	return bit < 8 ? kNames[bit] : "UNKNOWN";
+}
+
+/* CRC-8 SAE J1850: polynomial 0x1d, init 0xff, final xor 0xff
+ * (check value of "123456789": 0x4b). */
+constexpr std::uint8_t crc8J1850(const std::uint8_t *data, std::size_t len)
+{
+	std::uint8_t crc = 0xff;
+	for (std::size_t i = 0; i < len; ++i) {
+		crc = static_cast<std::uint8_t>(crc ^ data[i]);
+		for (int b = 0; b < 8; ++b)
+			crc = (crc & 0x80) ? static_cast<std::uint8_t>((crc << 1) ^ 0x1d)
+					   : static_cast<std::uint8_t>(crc << 1);
+	}
+	return static_cast<std::uint8_t>(crc ^ 0xff);
+}
+
+struct RawFrame {
+	std::uint32_t id = 0;
+	std::uint8_t len = 0;
+	std::array<std::uint8_t, 8> data{};
+};
+
+/* The CRC byte of a frame with identifier `id` (the real one on the bus) and
+ * data bytes 0..6. */
+constexpr std::uint8_t frameCrc(std::uint32_t id, const std::array<std::uint8_t, 8> &data)
+{
+	std::uint8_t bytes[9] = {
+		static_cast<std::uint8_t>(id & 0xff), static_cast<std::uint8_t>((id >> 8) & 0x07),
+		data[0], data[1], data[2], data[3], data[4], data[5], data[6],
+	};
+	return crc8J1850(bytes, sizeof(bytes));
+}
+
+/* Bits on the wire of a classic standard-id data frame with `data_bytes` bytes
+ * and worst-case bit stuffing, interframe space included (135 for 8 bytes). */
+constexpr int worstCaseFrameBits(int data_bytes)
+{
+	return 34 + 8 * data_bytes + 13 + (34 + 8 * data_bytes - 1) / 4;
+}
+
+/* Fraction of the bus (0..1) the sensor takes at `frames_hz` camera frames per
+ * second (every one a report with pose: 6 frames), `heartbeat_hz` heartbeats
+ * and `command_hz` commands per second, at `bitrate` bit/s, worst-case
+ * stuffing. 60 / 10 / 500 kbit/s: 0.0999. */
+constexpr double worstCaseBusLoad(double frames_hz, double heartbeat_hz, double bitrate,
+				  double command_hz = 0.0)
+{
+	return (kReportFrames * frames_hz + heartbeat_hz + command_hz) *
+	       worstCaseFrameBits(kFrameLength) / bitrate;
+}
+
+struct PoseData {
+	std::uint32_t frame_counter = 0;	/* the camera frame's sequence number */
+	double t_mm[3]{};			/* X_c = R X_t + t; Tx, Ty: +-3276.7, Tz: 0..6553.5 */
+	double q[4]{ 1, 0, 0, 0 };		/* w x y z */
+	double rpy_deg[3]{};			/* roll, pan, tilt */
+	double sigma_t_mm[3]{};			/* 1-sigma; >= 25.5 is sent as 25.5 (saturated) */
+	double sigma_rpy_deg[3]{};		/* 1-sigma; >= 2.55 is sent as 2.55 (saturated) */
+};
+
+struct StatusData {
+	SensorState state = SensorState::Startup;
+	bool enabled = true;
+	bool pose_valid = false;
+	bool tracked = false;
+	StrobeMode strobe = StrobeMode::Off;
+	int leds_used = 0;
+	double rms_px = 0;			/* >= 2.55 is sent as 2.55 (saturated) */
+	std::uint8_t faults = 0;		/* fault:: bits */
+	double latency_ms = 0;			/* sensor timestamp to CAN send; >= 655.35 saturated */
+};
+
+struct HeartbeatData {
+	std::uint32_t uptime_s = 0;		/* saturates at 2^24 - 1 */
+	SensorState state = SensorState::Startup;
+	TrackMode mode = TrackMode::Track;
+	StrobeMode strobe = StrobeMode::Off;
+	bool enabled = true;
+	std::uint8_t faults = 0;
+	double frame_rate_hz = 0;		/* resolution 0.5, up to 127.5 */
+};
+
+struct CommandData {
+	bool enable = true;
+	TrackMode mode = TrackMode::Track;
+	StrobeMode strobe = StrobeMode::Unchanged;
+	std::uint16_t exposure_us = 0;		/* 0: unchanged */
+	double gain = 0;			/* resolution 0.1, up to 25.5; 0: unchanged */
+};
+
+namespace detail {
+
+/* Resolution (factor) of each scaled signal. */
+constexpr double kTranslationRes = 0.1;
+constexpr double kQuatRes = 0.0001;
+constexpr double kAngleRes = 0.01;
+constexpr double kSigmaTRes = 0.1;
+constexpr double kSigmaRpyRes = 0.01;
+constexpr double kRmsRes = 0.01;
+constexpr double kLatencyRes = 0.01;
+constexpr double kFrameRateRes = 0.5;
+constexpr double kGainRes = 0.1;
+
+/* value / res rounded to the nearest integer and clamped to [lo, hi]; NaN
+ * gives `nan_raw`. */
+inline std::int64_t toRaw(double value, double res, std::int64_t lo, std::int64_t hi, std::int64_t nan_raw)
+{
+	if (std::isnan(value))
+		return nan_raw;
+	const double r = std::round(value / res);
+	if (r <= static_cast<double>(lo))
+		return lo;
+	if (r >= static_cast<double>(hi))
+		return hi;
+	return static_cast<std::int64_t>(r);
+}
+
+/* True when value / res rounds into [lo, hi] (false for NaN and infinities). */
+inline bool encodable(double value, double res, std::int64_t lo, std::int64_t hi)
+{
+	if (!std::isfinite(value))
+		return false;
+	const double r = std::round(value / res);
+	return r >= static_cast<double>(lo) && r <= static_cast<double>(hi);
+}
+
+constexpr std::uint64_t field(std::uint64_t raw, unsigned int start, unsigned int length)
+{
+	return (raw & ((std::uint64_t{ 1 } << length) - 1)) << start;
+}
+
+constexpr std::uint64_t signedField(std::int64_t raw, unsigned int start, unsigned int length)
+{
+	return field(static_cast<std::uint64_t>(raw), start, length);
+}
+
+constexpr std::uint64_t bits(const std::array<std::uint8_t, 8> &data, unsigned int start, unsigned int length)
+{
+	std::uint64_t word = 0;
+	for (int i = 7; i >= 0; --i)
+		word = (word << 8) | data[static_cast<std::size_t>(i)];
+	return (word >> start) & ((std::uint64_t{ 1 } << length) - 1);
+}
+
+/* Sign-extended field of `length` bits. */
+constexpr std::int64_t signedBits(const std::array<std::uint8_t, 8> &data, unsigned int start, unsigned int length)
+{
+	const std::uint64_t raw = bits(data, start, length);
+	const std::uint64_t sign = std::uint64_t{ 1 } << (length - 1);
+	return (raw & sign) ? static_cast<std::int64_t>(raw) - static_cast<std::int64_t>(sign << 1)
+			    : static_cast<std::int64_t>(raw);
+}
+
+constexpr std::uint64_t flag(bool value, unsigned int bit)
+{
+	return value ? std::uint64_t{ 1 } << bit : 0;
+}
+
+constexpr std::size_t slot(std::uint32_t offset)
+{
+	return offset == kCommand ? 7 : offset;
+}
+
+constexpr std::size_t kSlots = 8;
+
+} /* namespace detail */
+
+/*
+ * Encoder: turns one camera frame's results into frames, keeping the alive
+ * counters (per identifier) and the report sequence. Never allocates.
+ */
+class Encoder
+{
+public:
+	/* base_id must satisfy validBaseId(); identifiers are masked to 11 bits. */
+	explicit Encoder(std::uint32_t base_id = kDefaultBaseId) : base_id_(base_id) {}
+
+	/*
+	 * One camera frame's report: the five pose frames (when status.pose_valid,
+	 * pose != nullptr and the pose is encodable) and then the status frame,
+	 * all with the next sequence number. Returns the number of frames written
+	 * to out: 6 with a pose, 1 without. When a pose was asked for but cannot
+	 * be sent (pose == nullptr, a translation outside Tx/Ty +-3276.7 mm or
+	 * Tz 0..6553.5 mm, or a non-finite value in t, q or rpy), the status goes
+	 * out with PoseValid cleared and poseDropped() is true until the next
+	 * report. Other fields saturate at their ranges.
+	 */
+	int encodeReport(const StatusData &status, const PoseData *pose, RawFrame out[6])
+	{
+		using namespace detail;
+		const std::uint8_t seq = sequence_;
+		sequence_ = static_cast<std::uint8_t>((sequence_ + 1) & 0x0f);
+
+		pose_dropped_ = false;
+		bool send_pose = status.pose_valid;
+		if (send_pose && (pose == nullptr || !poseEncodable(*pose))) {
+			send_pose = false;
+			pose_dropped_ = true;
+		}
+
+		int n = 0;
+		if (send_pose) {
+			const PoseData &p = *pose;
+			out[n++] = finish(kTranslation, seq,
+					  signedField(toRaw(p.t_mm[0], kTranslationRes, -32768, 32767, 0), 0, 16) |
+					  signedField(toRaw(p.t_mm[1], kTranslationRes, -32768, 32767, 0), 16, 16) |
+					  field(static_cast<std::uint64_t>(toRaw(p.t_mm[2], kTranslationRes, 0, 65535, 0)), 32, 16));
+			out[n++] = finish(kQuatA, seq,
+					  signedField(toRaw(p.q[0], kQuatRes, -32768, 32767, 0), 0, 16) |
+					  signedField(toRaw(p.q[1], kQuatRes, -32768, 32767, 0), 16, 16) |
+					  signedField(toRaw(p.q[2], kQuatRes, -32768, 32767, 0), 32, 16));
+			out[n++] = finish(kQuatB, seq,
+					  signedField(toRaw(p.q[3], kQuatRes, -32768, 32767, 0), 0, 16) |
+					  field(p.frame_counter, 16, 32));
+			out[n++] = finish(kAngles, seq,
+					  signedField(toRaw(p.rpy_deg[0], kAngleRes, -32768, 32767, 0), 0, 16) |
+					  signedField(toRaw(p.rpy_deg[1], kAngleRes, -32768, 32767, 0), 16, 16) |
+					  signedField(toRaw(p.rpy_deg[2], kAngleRes, -32768, 32767, 0), 32, 16));
+			std::uint64_t sigma = 0;
+			for (unsigned int i = 0; i < 3; ++i) {
+				sigma |= signedField(toRaw(p.sigma_t_mm[i], kSigmaTRes, 0, 255, 255), 8 * i, 8);
+				sigma |= signedField(toRaw(p.sigma_rpy_deg[i], kSigmaRpyRes, 0, 255, 255), 24 + 8 * i, 8);
+			}
+			out[n++] = finish(kSigma, seq, sigma);
+		}
+
+		const std::uint64_t st =
+			field(static_cast<std::uint64_t>(status.state), 0, 3) |
+			flag(status.enabled, 3) | flag(send_pose, 4) | flag(status.tracked, 5) |
+			field(static_cast<std::uint64_t>(status.strobe), 6, 2) |
+			signedField(status.leds_used < 0 ? 0 : (status.leds_used > 255 ? 255 : status.leds_used), 8, 8) |
+			signedField(toRaw(status.rms_px, kRmsRes, 0, 255, 255), 16, 8) |
+			field(status.faults, 24, 8) |
+			signedField(toRaw(status.latency_ms, kLatencyRes, 0, 65535, 65535), 32, 16);
+		out[n++] = finish(kStatus, seq, st);
+		return n;
+	}
+
+	RawFrame encodeHeartbeat(const HeartbeatData &hb)
+	{
+		using namespace detail;
+		const std::uint64_t uptime = hb.uptime_s > 0xffffffu ? 0xffffffu : hb.uptime_s;
+		return finish(kHeartbeat, 0,
+			      field(uptime, 0, 24) |
+			      field(static_cast<std::uint64_t>(hb.state), 24, 3) |
+			      field(static_cast<std::uint64_t>(hb.mode), 27, 1) |
+			      field(static_cast<std::uint64_t>(hb.strobe), 28, 2) |
+			      flag(hb.enabled, 30) |
+			      field(hb.faults, 32, 8) |
+			      signedField(toRaw(hb.frame_rate_hz, kFrameRateRes, 0, 255, 0), 40, 8));
+	}
+
+	/* For the controller side (and tests). */
+	RawFrame encodeCommand(const CommandData &cmd)
+	{
+		using namespace detail;
+		return finish(kCommand, 0,
+			      flag(cmd.enable, 0) |
+			      field(static_cast<std::uint64_t>(cmd.mode), 1, 1) |
+			      field(static_cast<std::uint64_t>(cmd.strobe), 2, 2) |
+			      field(cmd.exposure_us, 8, 16) |
+			      signedField(toRaw(cmd.gain, kGainRes, 0, 255, 0), 24, 8));
+	}
+
+	std::uint32_t baseId() const { return base_id_; }
+	/* The last encodeReport() was asked for a pose it could not send. */
+	bool poseDropped() const { return pose_dropped_; }
+	/* The sequence the next report will carry (0..15). */
+	std::uint8_t nextSequence() const { return sequence_; }
+
+	/* True when the pose fits the fields that must not saturate (translation)
+	 * and t, q, rpy are finite. */
+	static bool poseEncodable(const PoseData &p)
+	{
+		using namespace detail;
+		if (!encodable(p.t_mm[0], kTranslationRes, -32768, 32767) ||
+		    !encodable(p.t_mm[1], kTranslationRes, -32768, 32767) ||
+		    !encodable(p.t_mm[2], kTranslationRes, 0, 65535))
+			return false;
+		for (double v : p.q)
+			if (!std::isfinite(v))
+				return false;
+		for (double v : p.rpy_deg)
+			if (!std::isfinite(v))
+				return false;
+		return true;
+	}
+
+private:
+	RawFrame finish(std::uint32_t offset, std::uint8_t seq, std::uint64_t payload)
+	{
+		RawFrame f;
+		f.id = (base_id_ + offset) & 0x7ff;
+		f.len = kFrameLength;
+		std::uint8_t &alive = alive_[detail::slot(offset)];
+		for (std::size_t i = 0; i < 6; ++i)
+			f.data[i] = static_cast<std::uint8_t>(payload >> (8 * i));
+		f.data[6] = static_cast<std::uint8_t>((alive & 0x0f) | ((seq & 0x0f) << 4));
+		f.data[7] = frameCrc(f.id, f.data);
+		alive = static_cast<std::uint8_t>((alive + 1) & 0x0f);
+		return f;
+	}
+
+	std::uint32_t base_id_;
+	std::array<std::uint8_t, detail::kSlots> alive_{};
+	std::uint8_t sequence_ = 0;
+	bool pose_dropped_ = false;
+};
+
+enum class FrameError : std::uint8_t {
+	None,
+	UnknownId,
+	WrongLength,
+	BadCrc,
+	StaleAlive,	/* repeated alive counter */
+};
+
+inline const char *frameErrorName(FrameError error)
+{
+	switch (error) {
+	case FrameError::None: return "none";
+	case FrameError::UnknownId: return "unknown id";
+	case FrameError::WrongLength: return "wrong length";
+	case FrameError::BadCrc: return "bad CRC";
+	case FrameError::StaleAlive: return "stale alive counter";
+	}
+	return "unknown error";
+}
+
+/*
+ * Decoder: checks and decodes frames from the bus and assembles reports.
+ * Never allocates.
+ *
+ * A frame is Rejected for a length other than 8 (WrongLength), a CRC that does
+ * not match its identifier and data (BadCrc), or an alive counter equal to the
+ * previous accepted one of its identifier (StaleAlive: repeated or stuck data).
+ * An alive counter that jumps by more than 1 is accepted and the skipped
+ * counts are added to alive_gaps (frames lost). Identifiers that are not ours
+ * (outside base .. base + 0x10, or an unused offset) are normal on a shared
+ * bus: Event::None, lastError() UnknownId, counted in unknown_ids only.
+ *
+ * Pose frames are held until the status frame of the same sequence arrives;
+ * that status completes a Report. poseValid() is true when the status says
+ * PoseValid and all five pose frames of that sequence arrived intact since
+ * the previous status; otherwise a PoseValid status counts in
+ * incomplete_poses.
+ */
+class Decoder
+{
+public:
+	enum class Event : std::uint8_t {
+		None,		/* frame taken (or not ours), nothing completed */
+		Report,
+		Heartbeat,
+		Command,
+		Rejected,
+	};
+
+	struct Counters {
+		std::uint64_t frames = 0;		/* every frame fed */
+		std::uint64_t reports = 0;
+		std::uint64_t valid_poses = 0;
+		std::uint64_t incomplete_poses = 0;
+		std::uint64_t crc_errors = 0;
+		std::uint64_t length_errors = 0;
+		std::uint64_t unknown_ids = 0;
+		std::uint64_t alive_gaps = 0;		/* skipped counters: frames lost */
+		std::uint64_t stale_frames = 0;
+	};
+
+	explicit Decoder(std::uint32_t base_id = kDefaultBaseId) : base_id_(base_id) {}
+
+	Event feed(const RawFrame &frame)
+	{
+		using namespace detail;
+		++counters_.frames;
+		last_error_ = FrameError::None;
+
+		if (frame.id < base_id_ || frame.id > base_id_ + kCommand ||
+		    (frame.id - base_id_ > kHeartbeat && frame.id - base_id_ != kCommand)) {
+			++counters_.unknown_ids;
+			last_error_ = FrameError::UnknownId;
+			return Event::None;
+		}
+		const std::uint32_t offset = frame.id - base_id_;
+		if (frame.len != kFrameLength) {
+			++counters_.length_errors;
+			last_error_ = FrameError::WrongLength;
+			return Event::Rejected;
+		}
+		if (frameCrc(frame.id, frame.data) != frame.data[7]) {
+			++counters_.crc_errors;
+			last_error_ = FrameError::BadCrc;
+			return Event::Rejected;
+		}
+
+		const std::uint8_t alive = frame.data[6] & 0x0f;
+		const std::uint8_t seq = static_cast<std::uint8_t>(frame.data[6] >> 4);
+		const std::size_t s = slot(offset);
+		if (alive_seen_[s]) {
+			const unsigned int step = (alive - alive_[s]) & 0x0fu;
+			if (step == 0) {
+				++counters_.stale_frames;
+				last_error_ = FrameError::StaleAlive;
+				return Event::Rejected;
+			}
+			counters_.alive_gaps += step - 1;
+		}
+		alive_seen_[s] = true;
+		alive_[s] = alive;
+
+		const std::array<std::uint8_t, 8> &d = frame.data;
+		switch (offset) {
+		case kTranslation:
+			takePose(kTranslation, seq);
+			pending_.t_mm[0] = static_cast<double>(signedBits(d, 0, 16)) * kTranslationRes;
+			pending_.t_mm[1] = static_cast<double>(signedBits(d, 16, 16)) * kTranslationRes;
+			pending_.t_mm[2] = static_cast<double>(bits(d, 32, 16)) * kTranslationRes;
+			return Event::None;
+		case kQuatA:
+			takePose(kQuatA, seq);
+			for (unsigned int i = 0; i < 3; ++i)
+				pending_.q[i] = static_cast<double>(signedBits(d, 16 * i, 16)) * kQuatRes;
+			return Event::None;
+		case kQuatB:
+			takePose(kQuatB, seq);
+			pending_.q[3] = static_cast<double>(signedBits(d, 0, 16)) * kQuatRes;
+			pending_.frame_counter = static_cast<std::uint32_t>(bits(d, 16, 32));
+			return Event::None;
+		case kAngles:
+			takePose(kAngles, seq);
+			for (unsigned int i = 0; i < 3; ++i)
+				pending_.rpy_deg[i] = static_cast<double>(signedBits(d, 16 * i, 16)) * kAngleRes;
+			return Event::None;
+		case kSigma:
+			takePose(kSigma, seq);
+			for (unsigned int i = 0; i < 3; ++i) {
+				pending_.sigma_t_mm[i] = static_cast<double>(bits(d, 8 * i, 8)) * kSigmaTRes;
+				pending_.sigma_rpy_deg[i] = static_cast<double>(bits(d, 24 + 8 * i, 8)) * kSigmaRpyRes;
+			}
+			return Event::None;
+		case kStatus:
+			return takeStatus(d, seq);
+		case kHeartbeat:
+			heartbeat_.uptime_s = static_cast<std::uint32_t>(bits(d, 0, 24));
+			heartbeat_.state = static_cast<SensorState>(bits(d, 24, 3));
+			heartbeat_.mode = static_cast<TrackMode>(bits(d, 27, 1));
+			heartbeat_.strobe = static_cast<StrobeMode>(bits(d, 28, 2));
+			heartbeat_.enabled = bits(d, 30, 1) != 0;
+			heartbeat_.faults = static_cast<std::uint8_t>(bits(d, 32, 8));
+			heartbeat_.frame_rate_hz = static_cast<double>(bits(d, 40, 8)) * kFrameRateRes;
+			return Event::Heartbeat;
+		default: /* kCommand */
+			command_.enable = bits(d, 0, 1) != 0;
+			command_.mode = static_cast<TrackMode>(bits(d, 1, 1));
+			command_.strobe = static_cast<StrobeMode>(bits(d, 2, 2));
+			command_.exposure_us = static_cast<std::uint16_t>(bits(d, 8, 16));
+			command_.gain = static_cast<double>(bits(d, 24, 8)) * kGainRes;
+			return Event::Command;
+		}
+	}
+
+	/* The last report's status, as sent (pose_valid is the sender's flag). */
+	const StatusData &status() const { return status_; }
+	/* After a Report: status().pose_valid and all five pose frames of its
+	 * sequence arrived intact. */
+	bool poseValid() const { return pose_valid_; }
+	/* The last valid pose (current when poseValid()). */
+	const PoseData &pose() const { return pose_; }
+	/* The sequence of the last report (0..15). */
+	std::uint8_t sequence() const { return sequence_; }
+	const HeartbeatData &heartbeat() const { return heartbeat_; }
+	const CommandData &command() const { return command_; }
+	FrameError lastError() const { return last_error_; }
+	const Counters &counters() const { return counters_; }
+	std::uint32_t baseId() const { return base_id_; }
+
+private:
+	void takePose(std::uint32_t offset, std::uint8_t seq)
+	{
+		/* A pose frame of another sequence: what was held belongs to a
+		 * report whose status never came. */
+		if (pending_mask_ != 0 && pending_seq_ != seq)
+			pending_mask_ = 0;
+		pending_seq_ = seq;
+		pending_mask_ = static_cast<std::uint8_t>(pending_mask_ | (1u << offset));
+	}
+
+	Event takeStatus(const std::array<std::uint8_t, 8> &d, std::uint8_t seq)
+	{
+		using namespace detail;
+		status_.state = static_cast<SensorState>(bits(d, 0, 3));
+		status_.enabled = bits(d, 3, 1) != 0;
+		status_.pose_valid = bits(d, 4, 1) != 0;
+		status_.tracked = bits(d, 5, 1) != 0;
+		status_.strobe = static_cast<StrobeMode>(bits(d, 6, 2));
+		status_.leds_used = static_cast<int>(bits(d, 8, 8));
+		status_.rms_px = static_cast<double>(bits(d, 16, 8)) * kRmsRes;
+		status_.faults = static_cast<std::uint8_t>(bits(d, 24, 8));
+		status_.latency_ms = static_cast<double>(bits(d, 32, 16)) * kLatencyRes;
+		sequence_ = seq;
+
+		pose_valid_ = status_.pose_valid && pending_mask_ == 0x1f && pending_seq_ == seq;
+		if (pose_valid_) {
+			pose_ = pending_;
+			++counters_.valid_poses;
+		} else if (status_.pose_valid) {
+			++counters_.incomplete_poses;
+		}
+		pending_mask_ = 0;
+		++counters_.reports;
+		return Event::Report;
+	}
+
+	std::uint32_t base_id_;
+	std::array<std::uint8_t, detail::kSlots> alive_{};
+	std::array<bool, detail::kSlots> alive_seen_{};
+	PoseData pending_;
+	std::uint8_t pending_mask_ = 0;		/* bit per pose offset held */
+	std::uint8_t pending_seq_ = 0;
+	StatusData status_;
+	PoseData pose_;
+	bool pose_valid_ = false;
+	std::uint8_t sequence_ = 0;
+	HeartbeatData heartbeat_;
+	CommandData command_;
+	FrameError last_error_ = FrameError::None;
+	Counters counters_;
+};
+
+} /* namespace dockpose::can */
