@@ -1,0 +1,960 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Board configuration: JSON -> BoardConfig, with every error collected and
+ * named by its JSON path (docs/configuration.md).
+ *
+ * The reader walks the document section by section. Each section records the
+ * keys it knows while it reads them; what is left afterwards is an unknown key
+ * (a typo), reported with the closest known key. Values are stored only when
+ * they are valid, so cross-checks (exposure against the frame period, LED
+ * counts against the target) see either the user's valid value or the default;
+ * a cross-check is skipped when one of its inputs was already reported.
+ */
+#include "firmware/config.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cinttypes>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <limits>
+#include <set>
+#include <span>
+#include <system_error>
+
+#include <nlohmann/json.hpp>
+
+#include "algo/io/model_json.h"
+
+namespace dockpose::firmware {
+
+const char *strobeModeName(StrobeMode mode)
+{
+	switch (mode) {
+	case StrobeMode::Off:
+		return "off";
+	case StrobeMode::Constant:
+		return "constant";
+	case StrobeMode::Alternate:
+		return "alternate";
+	}
+	return "unknown";
+}
+
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr const char *kCameraBackends[] = { "libcamera", "synthetic", "replay" };
+constexpr const char *kStrobeBackends[] = { "gpiod", "recording" };
+constexpr const char *kCanBackends[] = { "socketcan", "file", "loopback" };
+constexpr const char *kStrobeModes[] = { "off", "constant", "alternate" };
+constexpr const char *kTrackModes[] = { "track", "search_only" };
+/* CiA 301 / common CAN bit rates. */
+constexpr std::int64_t kCanBitrates[] = { 10000,  20000,  50000,  100000, 125000,
+					  250000, 500000, 800000, 1000000 };
+/* The protocol uses base_id + 0 .. base_id + kCanIdSpan (firmware/protocol). */
+constexpr std::uint32_t kCanIdSpan = 0x10;
+constexpr std::uint32_t kCanMaxId = 0x7ff;
+constexpr std::size_t kIfNameSize = 16; /* IFNAMSIZ, including the terminating NUL */
+
+/* A number for a message: integers without a fraction, others with 6 significant digits. */
+std::string num(double v)
+{
+	char buf[40];
+	if (std::isfinite(v) && v == std::floor(v) && std::fabs(v) < 1e15)
+		std::snprintf(buf, sizeof(buf), "%.0f", v);
+	else
+		std::snprintf(buf, sizeof(buf), "%.6g", v);
+	return buf;
+}
+
+std::string hex(std::uint64_t v)
+{
+	char buf[24];
+	std::snprintf(buf, sizeof(buf), "0x%" PRIx64, v);
+	return buf;
+}
+
+std::string quote(const std::string &s)
+{
+	return json(s).dump();
+}
+
+std::string joinNames(std::span<const char *const> names)
+{
+	std::string out;
+	for (const char *n : names) {
+		if (!out.empty())
+			out += ", ";
+		out += n;
+	}
+	return out;
+}
+
+/* What a JSON value is, for "expected X, got Y". Numbers show themselves. */
+std::string describe(const json &j)
+{
+	if (j.is_string())
+		return "a string";
+	if (j.is_boolean())
+		return "a boolean";
+	if (j.is_null())
+		return "null";
+	if (j.is_array())
+		return "an array";
+	if (j.is_object())
+		return "an object";
+	if (j.is_number())
+		return j.dump();
+	return "something else";
+}
+
+/* Optimal string alignment distance (Levenshtein plus adjacent transpositions). */
+std::size_t editDistance(const std::string &a, const std::string &b)
+{
+	const std::size_t n = a.size(), m = b.size();
+	std::vector<std::vector<std::size_t>> d(n + 1, std::vector<std::size_t>(m + 1));
+	for (std::size_t i = 0; i <= n; ++i)
+		d[i][0] = i;
+	for (std::size_t j = 0; j <= m; ++j)
+		d[0][j] = j;
+	for (std::size_t i = 1; i <= n; ++i) {
+		for (std::size_t j = 1; j <= m; ++j) {
+			const std::size_t cost = a[i - 1] == b[j - 1] ? 0 : 1;
+			d[i][j] = std::min(
+				{ d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + cost });
+			if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1])
+				d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+		}
+	}
+	return d[n][m];
+}
+
+/* The closest known key when it is close enough to be a typo of it, else empty. */
+std::string closestKey(const std::string &key, const std::vector<std::string> &known)
+{
+	std::string lower = key;
+	std::transform(lower.begin(), lower.end(), lower.begin(),
+		       [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+	std::string best;
+	std::size_t best_d = std::numeric_limits<std::size_t>::max();
+	for (const std::string &k : known) {
+		std::size_t d = editDistance(lower, k);
+		/* A prefix ("exposure" for "exposure_us") counts as close. */
+		if (lower.size() >= 3 && (k.rfind(lower, 0) == 0 || lower.rfind(k, 0) == 0))
+			d = std::min<std::size_t>(d, 1);
+		if (d < best_d) {
+			best_d = d;
+			best = k;
+		}
+	}
+	const std::size_t limit = std::max<std::size_t>(2, (key.size() + 2) / 3);
+	return best_d <= limit ? best : std::string();
+}
+
+enum class Got : std::uint8_t {
+	Absent,
+	Ok,
+	Bad
+};
+
+/* Closed or open interval; hi may be infinite. */
+struct Range {
+	double lo;
+	double hi;
+	bool lo_open = false;
+	bool hi_open = false;
+
+	bool contains(double v) const
+	{
+		return (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
+	}
+	std::string text() const
+	{
+		if (std::isinf(hi))
+			return std::string("(must be ") + (lo_open ? "> " : ">= ") + num(lo) + ")";
+		return std::string(lo_open ? "(" : "[") + num(lo) + ", " + num(hi) +
+		       (hi_open ? ")" : "]");
+	}
+};
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+class Checker
+{
+public:
+	explicit Checker(fs::path base)
+		: base_(std::move(base))
+	{
+	}
+
+	void fail(const std::string &path, const std::string &what)
+	{
+		errors_.push_back(path + ": " + what);
+		bad_.insert(path);
+	}
+	void failRaw(const std::string &message) { errors_.push_back(message); }
+	bool failed(const std::string &path) const { return bad_.count(path) != 0; }
+
+	std::string resolve(const std::string &p) const
+	{
+		fs::path fp(p);
+		if (fp.is_relative())
+			fp = base_ / fp;
+		return fp.lexically_normal().string();
+	}
+
+	std::vector<std::string> take() { return std::move(errors_); }
+
+private:
+	fs::path base_;
+	std::vector<std::string> errors_;
+	std::set<std::string> bad_;
+};
+
+/* One JSON object of the document: a section, or the top level (empty path). */
+class Section
+{
+public:
+	Section(Checker *checker, const json *object, std::string path)
+		: checker_(checker),
+		  object_(object),
+		  path_(std::move(path))
+	{
+	}
+
+	Checker &checker() const { return *checker_; }
+	bool present() const { return object_ != nullptr; }
+	const std::string &path() const { return path_; }
+	std::string at(const std::string &key) const
+	{
+		return path_.empty() ? key : path_ + "." + key;
+	}
+
+	/* The value of a key (nullptr when absent); marks the key as known. */
+	const json *get(const char *key)
+	{
+		known_.emplace_back(key);
+		if (!object_)
+			return nullptr;
+		const auto it = object_->find(key);
+		return it == object_->end() ? nullptr : &*it;
+	}
+
+	/* Report a missing key unless its whole section was already reported. */
+	void missing(const char *key, const std::string &what)
+	{
+		if (!object_ && checker_->failed(path_))
+			return;
+		checker_->fail(at(key), what);
+	}
+
+	/* Report the keys nobody asked for. */
+	void finish()
+	{
+		if (!object_)
+			return;
+		for (const auto &item : object_->items()) {
+			const std::string &key = item.key();
+			if (std::find(known_.begin(), known_.end(), key) != known_.end())
+				continue;
+			const std::string where = path_.empty() ? std::string("at top level")
+								: "in " + path_;
+			const std::string close = closestKey(key, known_);
+			std::string hint;
+			if (!close.empty()) {
+				hint = "did you mean " + quote(close) + "?";
+			} else {
+				hint = "known keys: ";
+				for (std::size_t i = 0; i < known_.size(); ++i)
+					hint += (i ? ", " : "") + known_[i];
+			}
+			checker_->failRaw("unknown key " + quote(key) + " " + where + " (" + hint +
+					  ")");
+		}
+	}
+
+private:
+	Checker *checker_;
+	const json *object_;
+	std::string path_;
+	std::vector<std::string> known_;
+};
+
+Section subsection(Section &parent, const char *key, bool required)
+{
+	const json *j = parent.get(key);
+	if (!j) {
+		if (required)
+			parent.missing(key, "required section is missing");
+		return Section(&parent.checker(), nullptr, parent.at(key));
+	}
+	if (!j->is_object()) {
+		parent.checker().fail(parent.at(key), "expected an object, got " + describe(*j));
+		return Section(&parent.checker(), nullptr, parent.at(key));
+	}
+	return Section(&parent.checker(), j, parent.at(key));
+}
+
+Got getString(Section &s, const char *key, std::string *out)
+{
+	const json *j = s.get(key);
+	if (!j)
+		return Got::Absent;
+	if (!j->is_string()) {
+		s.checker().fail(s.at(key), "expected a string, got " + describe(*j));
+		return Got::Bad;
+	}
+	*out = j->get<std::string>();
+	return Got::Ok;
+}
+
+Got getBool(Section &s, const char *key, bool *out)
+{
+	const json *j = s.get(key);
+	if (!j)
+		return Got::Absent;
+	if (!j->is_boolean()) {
+		s.checker().fail(s.at(key), "expected true or false, got " + describe(*j));
+		return Got::Bad;
+	}
+	*out = j->get<bool>();
+	return Got::Ok;
+}
+
+/* An integral JSON number (2000 or 2000.0) as int64, saturated. False for anything else. */
+bool asInt64(const json &j, std::int64_t *out)
+{
+	constexpr std::int64_t kMax = std::numeric_limits<std::int64_t>::max();
+	if (j.is_number_unsigned()) {
+		const std::uint64_t u = j.get<std::uint64_t>();
+		*out = u > static_cast<std::uint64_t>(kMax) ? kMax : static_cast<std::int64_t>(u);
+		return true;
+	}
+	if (j.is_number_integer()) {
+		*out = j.get<std::int64_t>();
+		return true;
+	}
+	if (j.is_number_float()) {
+		const double d = j.get<double>();
+		if (!std::isfinite(d) || d != std::floor(d))
+			return false;
+		if (std::fabs(d) >= 9.2e18)
+			*out = d > 0 ? kMax : std::numeric_limits<std::int64_t>::min();
+		else
+			*out = static_cast<std::int64_t>(d);
+		return true;
+	}
+	return false;
+}
+
+/* An upper bound for getInt() that is only the int's own limit (not shown in messages). */
+constexpr std::int64_t kNoLimit = std::numeric_limits<int>::max();
+
+Got getInt(Section &s, const char *key, std::int64_t lo, std::int64_t hi, int *out)
+{
+	const json *j = s.get(key);
+	if (!j)
+		return Got::Absent;
+	std::int64_t v = 0;
+	if (!asInt64(*j, &v)) {
+		s.checker().fail(s.at(key), "expected an integer, got " + describe(*j));
+		return Got::Bad;
+	}
+	if (v < lo || v > hi) {
+		s.checker().fail(s.at(key),
+				 j->dump() + " is out of range " +
+					 (hi == kNoLimit ? "(must be >= " + std::to_string(lo) + ")"
+							 : "[" + std::to_string(lo) + ", " +
+								   std::to_string(hi) + "]"));
+		return Got::Bad;
+	}
+	*out = static_cast<int>(v);
+	return Got::Ok;
+}
+
+Got getUint64(Section &s, const char *key, std::uint64_t *out)
+{
+	const json *j = s.get(key);
+	if (!j)
+		return Got::Absent;
+	if (j->is_number_unsigned()) {
+		*out = j->get<std::uint64_t>();
+		return Got::Ok;
+	}
+	std::int64_t v = 0;
+	if (!asInt64(*j, &v)) {
+		s.checker().fail(s.at(key), "expected an integer, got " + describe(*j));
+		return Got::Bad;
+	}
+	if (v < 0) {
+		s.checker().fail(s.at(key), j->dump() + " is out of range (must be >= 0)");
+		return Got::Bad;
+	}
+	*out = static_cast<std::uint64_t>(v);
+	return Got::Ok;
+}
+
+Got getDouble(Section &s, const char *key, const Range &range, double *out)
+{
+	const json *j = s.get(key);
+	if (!j)
+		return Got::Absent;
+	if (!j->is_number()) {
+		s.checker().fail(s.at(key), "expected a number, got " + describe(*j));
+		return Got::Bad;
+	}
+	const double v = j->get<double>();
+	if (!range.contains(v)) {
+		s.checker().fail(s.at(key), j->dump() + " is out of range " + range.text());
+		return Got::Bad;
+	}
+	*out = v;
+	return Got::Ok;
+}
+
+/* A string that must be one of `names`; *index gets its position. */
+Got getChoice(Section &s, const char *key, std::span<const char *const> names, std::size_t *index,
+	      std::string *value = nullptr)
+{
+	std::string v;
+	const Got got = getString(s, key, &v);
+	if (got != Got::Ok)
+		return got;
+	for (std::size_t i = 0; i < names.size(); ++i) {
+		if (v == names[i]) {
+			*index = i;
+			if (value)
+				*value = v;
+			return Got::Ok;
+		}
+	}
+	s.checker().fail(s.at(key), quote(v) + " is not one of " + joinNames(names));
+	return Got::Bad;
+}
+
+/* A non-empty file path, resolved against the configuration's directory. */
+Got getPath(Section &s, const char *key, std::string *written, std::string *resolved)
+{
+	const Got got = getString(s, key, written);
+	if (got != Got::Ok)
+		return got;
+	if (written->empty()) {
+		s.checker().fail(s.at(key), "must not be empty (a file path)");
+		return Got::Bad;
+	}
+	*resolved = s.checker().resolve(*written);
+	return Got::Ok;
+}
+
+/* [x, y, z, roll, pan, tilt]: mm, degrees; z > 0 (in front of the camera). */
+Got getPose(Section &s, const char *key, double out[6])
+{
+	const json *j = s.get(key);
+	if (!j)
+		return Got::Absent;
+	const std::string path = s.at(key);
+	if (!j->is_array() || j->size() != 6) {
+		s.checker().fail(path,
+				 "expected an array of 6 numbers [x, y, z mm, roll, pan, tilt "
+				 "degrees], got " +
+					 (j->is_array() ? "an array of " + std::to_string(j->size())
+							: describe(*j)));
+		return Got::Bad;
+	}
+	double v[6];
+	bool ok = true;
+	for (std::size_t i = 0; i < 6; ++i) {
+		const json &e = (*j)[i];
+		const std::string epath = path + "[" + std::to_string(i) + "]";
+		if (!e.is_number()) {
+			s.checker().fail(epath, "expected a number, got " + describe(e));
+			ok = false;
+			continue;
+		}
+		v[i] = e.get<double>();
+		if (i == 2 && !(v[i] > 0.0)) {
+			s.checker().fail(epath,
+					 "z = " + e.dump() +
+						 " mm is not in front of the camera (must be > 0)");
+			ok = false;
+		} else if (i >= 3 && !(v[i] >= -180.0 && v[i] <= 180.0)) {
+			s.checker().fail(epath, e.dump() + " degrees is out of range [-180, 180]");
+			ok = false;
+		}
+	}
+	if (!ok)
+		return Got::Bad;
+	std::copy(v, v + 6, out);
+	return Got::Ok;
+}
+
+/* The kernel's dev_valid_name(). Empty when fine, else why not. */
+std::string interfaceNameProblem(const std::string &name)
+{
+	if (name.empty())
+		return "must not be empty (a network interface such as \"can0\")";
+	if (name.size() >= kIfNameSize)
+		return quote(name) + " is " + std::to_string(name.size()) +
+		       " characters long; interface names have at most " +
+		       std::to_string(kIfNameSize - 1) + " (IFNAMSIZ)";
+	if (name == "." || name == "..")
+		return quote(name) + " is not an interface name";
+	for (char c : name)
+		if (c == '/' || c == ':' || std::isspace(static_cast<unsigned char>(c)))
+			return quote(name) +
+			       " is not an interface name (no '/', ':' or white space allowed)";
+	return {};
+}
+
+void readSynthetic(Section &syn, SyntheticCameraConfig *out)
+{
+	getPose(syn, "from", out->from);
+	getPose(syn, "to", out->to);
+	getDouble(syn, "duration_s", { 0.0, kInf, true, false }, &out->duration_s);
+	getBool(syn, "loop", &out->loop);
+	getInt(syn, "reflections", 0, 1000, &out->reflections);
+	getInt(syn, "glints", 0, 1000, &out->glints);
+	getInt(syn, "hot_pixels", 0, 1000, &out->hot_pixels);
+	getDouble(syn, "noise_sigma", { 0.0, 50.0 }, &out->noise_sigma);
+	getUint64(syn, "seed", &out->seed);
+	syn.finish();
+}
+
+void checkReplayFolder(Checker &c, const std::string &path, const std::string &written,
+		       const std::string &folder)
+{
+	const std::string shown = quote(written) + (written == folder ? "" : " (" + folder + ")");
+	std::error_code ec;
+	const fs::file_status st = fs::status(folder, ec);
+	if (ec || !fs::exists(st)) {
+		c.fail(path, shown + " does not exist");
+		return;
+	}
+	if (!fs::is_directory(st)) {
+		c.fail(path, shown + " is not a folder");
+		return;
+	}
+	fs::directory_iterator it(folder, ec);
+	if (ec) {
+		c.fail(path, shown + " cannot be read (" + ec.message() + ")");
+		return;
+	}
+	for (; it != fs::directory_iterator(); it.increment(ec)) {
+		const std::string name = it->path().filename().string();
+		if (name.size() > 10 && name.rfind("frame_", 0) == 0 &&
+		    name.compare(name.size() - 4, 4, ".pgm") == 0)
+			return;
+	}
+	if (ec) {
+		c.fail(path, shown + " cannot be read (" + ec.message() + ")");
+		return;
+	}
+	c.fail(path, shown + " holds no frame_*.pgm files");
+}
+
+void readCamera(Section &cam, CameraSection *out)
+{
+	Checker &c = cam.checker();
+	std::size_t index = 0;
+	const Got backend = getChoice(cam, "backend", kCameraBackends, &index, &out->backend);
+	if (backend == Got::Absent)
+		cam.missing("backend",
+			    "required key is missing (one of " + joinNames(kCameraBackends) + ")");
+	getString(cam, "id", &out->id);
+	getInt(cam, "index", 0, 255, &out->index);
+	const Got width = getInt(cam, "width", 0, 16384, &out->width);
+	const Got height = getInt(cam, "height", 0, 16384, &out->height);
+	const Got rate =
+		getDouble(cam, "frame_rate_hz", { 0.0, 240.0, true, false }, &out->frame_rate_hz);
+	const Got exposure = getInt(cam, "exposure_us", 10, 1000000, &out->exposure_us);
+	getDouble(cam, "analogue_gain", { 1.0, 64.0 }, &out->analogue_gain);
+	getInt(cam, "buffer_count", 2, 16, &out->buffer_count);
+	const Got stall = getInt(cam, "stall_timeout_ms", 50, 60000, &out->stall_timeout_ms);
+	std::string intrinsics_written;
+	const Got intrinsics = getPath(cam, "intrinsics", &intrinsics_written, &out->intrinsics);
+	if (intrinsics == Got::Absent)
+		cam.missing("intrinsics",
+			    "required key is missing (the camera calibration JSON file)");
+
+	Section syn = subsection(cam, "synthetic", false);
+	readSynthetic(syn, &out->synthetic);
+
+	Section rep = subsection(cam, "replay", false);
+	std::string folder_written;
+	const Got folder = getPath(rep, "folder", &folder_written, &out->replay.folder);
+	getBool(rep, "loop", &out->replay.loop);
+	rep.finish();
+	cam.finish();
+
+	if (rate != Got::Bad && exposure != Got::Bad) {
+		const double period_us = 1e6 / out->frame_rate_hz;
+		if (out->exposure_us > period_us)
+			c.fail(cam.at("exposure_us"),
+			       std::to_string(out->exposure_us) +
+				       " us is longer than the frame period of " + num(period_us) +
+				       " us at camera.frame_rate_hz " + num(out->frame_rate_hz));
+	}
+	if (rate != Got::Bad && stall != Got::Bad) {
+		const double period_ms = 1e3 / out->frame_rate_hz;
+		if (out->stall_timeout_ms <= 2.0 * period_ms)
+			c.fail(cam.at("stall_timeout_ms"),
+			       std::to_string(out->stall_timeout_ms) +
+				       " ms is not more than 2 frame periods (2 x " +
+				       num(period_ms) + " ms at camera.frame_rate_hz " +
+				       num(out->frame_rate_hz) + ")");
+	}
+
+	if (intrinsics == Got::Ok) {
+		const LoadResult<CameraIntrinsics> k = loadCameraIntrinsics(out->intrinsics);
+		if (!k.ok()) {
+			c.fail(cam.at("intrinsics"), "cannot read camera intrinsics " +
+							     quote(intrinsics_written) + ": " +
+							     k.error);
+		} else if (width != Got::Bad && height != Got::Bad) {
+			const int w = k.value.width, h = k.value.height;
+			if ((out->width != 0 && out->width != w) ||
+			    (out->height != 0 && out->height != h)) {
+				c.fail(cam.at("intrinsics"),
+				       quote(intrinsics_written) + ": size " + std::to_string(w) +
+					       "x" + std::to_string(h) +
+					       " does not match camera.width/height " +
+					       std::to_string(out->width) + "x" +
+					       std::to_string(out->height) +
+					       " (calibrate at the size the camera runs at)");
+			} else {
+				out->width = w;
+				out->height = h;
+			}
+		}
+	}
+
+	if (backend == Got::Ok && out->backend == "replay") {
+		if (folder == Got::Absent)
+			c.fail(rep.at("folder"),
+			       "required when camera.backend is \"replay\" (a folder of frame_*.pgm)");
+		else if (folder == Got::Ok)
+			checkReplayFolder(c, rep.at("folder"), folder_written, out->replay.folder);
+	}
+}
+
+void readStrobe(Section &st, StrobeSection *out)
+{
+	Checker &c = st.checker();
+	std::size_t index = 0;
+	const Got backend = getChoice(st, "backend", kStrobeBackends, &index, &out->backend);
+	if (backend == Got::Absent)
+		st.missing("backend",
+			   "required key is missing (one of " + joinNames(kStrobeBackends) + ")");
+	const Got chip = getString(st, "chip", &out->chip);
+	const Got line = getInt(st, "line", 0, 1023, &out->line);
+	getBool(st, "active_low", &out->active_low);
+	if (getChoice(st, "mode", kStrobeModes, &index) == Got::Ok)
+		out->mode = static_cast<StrobeMode>(index);
+	getInt(st, "pulse_margin_us", 0, 10000, &out->pulse_margin_us);
+	st.finish();
+
+	if (backend == Got::Ok && out->backend == "gpiod") {
+		if (chip == Got::Absent)
+			c.fail(st.at("chip"), "required when strobe.backend is \"gpiod\" (a chip "
+					      "name like \"gpiochip0\", a path, or a label like "
+					      "\"pinctrl-rp1\")");
+		else if (chip == Got::Ok && out->chip.empty())
+			c.fail(st.at("chip"), "must not be empty when strobe.backend is \"gpiod\"");
+		if (line == Got::Absent)
+			c.fail(st.at("line"),
+			       "required when strobe.backend is \"gpiod\" (the line offset on the chip)");
+	}
+}
+
+Got getCanId(Section &s, const char *key, std::uint32_t *out)
+{
+	const json *j = s.get(key);
+	if (!j)
+		return Got::Absent;
+	const std::string path = s.at(key);
+	std::int64_t v = 0;
+	if (j->is_string()) {
+		const std::string text = j->get<std::string>();
+		const bool is_hex = text.size() > 2 && text[0] == '0' &&
+				    (text[1] == 'x' || text[1] == 'X');
+		const std::string digits = is_hex ? text.substr(2) : text;
+		const char *allowed = is_hex ? "0123456789abcdefABCDEF" : "0123456789";
+		if (digits.empty() || digits.size() > 8 ||
+		    digits.find_first_not_of(allowed) != std::string::npos) {
+			s.checker().fail(path, quote(text) + " is not a CAN id (expected a number "
+							     "or a hex string like \"0x300\")");
+			return Got::Bad;
+		}
+		v = static_cast<std::int64_t>(std::stoull(digits, nullptr, is_hex ? 16 : 10));
+	} else if (!asInt64(*j, &v)) {
+		s.checker().fail(path, "expected a number or a hex string like \"0x300\", got " +
+					       describe(*j));
+		return Got::Bad;
+	}
+	if (v < 0) {
+		s.checker().fail(path, j->dump() + " is not a CAN id (must be >= 0)");
+		return Got::Bad;
+	}
+	const std::uint64_t id = static_cast<std::uint64_t>(v);
+	if (id > kCanMaxId) {
+		s.checker().fail(path, hex(id) + " is not an 11-bit CAN id (max " + hex(kCanMaxId) +
+					       "; " + hex(kCanMaxId - kCanIdSpan) +
+					       " to leave room for offsets up to " +
+					       hex(kCanIdSpan) + ")");
+		return Got::Bad;
+	}
+	if (id + kCanIdSpan > kCanMaxId) {
+		s.checker().fail(path, hex(id) + " leaves no room for offsets up to " +
+					       hex(kCanIdSpan) + " in 11 bits (max " +
+					       hex(kCanMaxId - kCanIdSpan) + ")");
+		return Got::Bad;
+	}
+	*out = static_cast<std::uint32_t>(id);
+	return Got::Ok;
+}
+
+void readCan(Section &can, CanSection *out)
+{
+	Checker &c = can.checker();
+	std::size_t index = 0;
+	const Got backend = getChoice(can, "backend", kCanBackends, &index, &out->backend);
+	if (backend == Got::Absent)
+		can.missing("backend",
+			    "required key is missing (one of " + joinNames(kCanBackends) + ")");
+	const Got iface = getString(can, "interface", &out->interface);
+	if (iface == Got::Ok &&
+	    !(out->interface.empty() && backend == Got::Ok && out->backend != "socketcan")) {
+		const std::string problem = interfaceNameProblem(out->interface);
+		if (!problem.empty())
+			c.fail(can.at("interface"), problem);
+	}
+	std::string log_written;
+	if (getString(can, "log_file", &log_written) == Got::Ok && !log_written.empty())
+		out->log_file = c.resolve(log_written);
+	getCanId(can, "base_id", &out->base_id);
+	const json *bitrate = can.get("bitrate");
+	if (bitrate) {
+		std::int64_t v = 0;
+		if (!asInt64(*bitrate, &v)) {
+			c.fail(can.at("bitrate"), "expected an integer, got " + describe(*bitrate));
+		} else if (std::find(std::begin(kCanBitrates), std::end(kCanBitrates), v) ==
+			   std::end(kCanBitrates)) {
+			std::string rates;
+			for (std::int64_t r : kCanBitrates)
+				rates += (rates.empty() ? "" : ", ") + std::to_string(r);
+			c.fail(can.at("bitrate"),
+			       bitrate->dump() + " is not a standard CAN bit rate (one of " +
+				       rates + ")");
+		} else {
+			out->bitrate = static_cast<int>(v);
+		}
+	}
+	getInt(can, "tx_queue_depth", 1, 4096, &out->tx_queue_depth);
+	getInt(can, "heartbeat_hz", 1, 100, &out->heartbeat_hz);
+	can.finish();
+
+	if (backend == Got::Ok && out->backend == "socketcan" && iface == Got::Absent)
+		c.fail(can.at("interface"),
+		       "required when can.backend is \"socketcan\" (an interface such as \"can0\")");
+}
+
+void readPipeline(Section &pl, PipelineSection *out)
+{
+	Checker &c = pl.checker();
+	std::string target_written;
+	const Got target = getPath(pl, "target", &target_written, &out->target);
+	if (target == Got::Absent)
+		pl.missing("target", "required key is missing (the target model JSON file)");
+	std::size_t index = 0;
+	if (getChoice(pl, "mode", kTrackModes, &index) == Got::Ok)
+		out->mode = static_cast<TrackMode>(index);
+	getDouble(pl, "max_rms_px", { 0.0, 5.0, true, false }, &out->max_rms_px);
+	const Got search = getInt(pl, "min_leds_search", 4, kNoLimit, &out->min_leds_search);
+	const Got track = getInt(pl, "min_leds_track", 4, kNoLimit, &out->min_leds_track);
+	getInt(pl, "degraded_hold_frames", 0, 10000, &out->degraded_hold_frames);
+	getInt(pl, "lost_after_frames", 1, 1000, &out->lost_after_frames);
+	pl.finish();
+
+	bool search_ok = search != Got::Bad;
+	if (target == Got::Ok) {
+		const LoadResult<TargetModel> model = loadTargetModel(out->target);
+		if (!model.ok()) {
+			c.fail(pl.at("target"), "cannot read target model " +
+							quote(target_written) + ": " + model.error);
+		} else if (search_ok) {
+			const std::size_t leds = model.value.points_mm.size();
+			if (static_cast<std::size_t>(out->min_leds_search) > leds) {
+				c.fail(pl.at("min_leds_search"),
+				       std::to_string(out->min_leds_search) +
+					       (search == Got::Absent ? " (the default)" : "") +
+					       " is more than the " + std::to_string(leds) +
+					       " LEDs of target " + quote(model.value.name));
+				search_ok = false;
+			}
+		}
+	}
+	if (search_ok && track != Got::Bad && out->min_leds_track > out->min_leds_search)
+		c.fail(pl.at("min_leds_track"), std::to_string(out->min_leds_track) +
+							" is out of range [4, " +
+							std::to_string(out->min_leds_search) +
+							"] (at most pipeline.min_leds_search)");
+}
+
+/* Parse JSON (comments allowed), reporting duplicate keys by path. */
+bool parseDocument(const std::string &text, const std::string &source, json *doc,
+		   std::vector<std::string> *errors)
+{
+	struct Level {
+		std::string name;
+		std::set<std::string> keys;
+		std::string last_key;
+		bool array;
+	};
+	std::vector<Level> stack;
+	std::vector<std::string> duplicates;
+	const json::parser_callback_t callback = [&](int, json::parse_event_t event,
+						     json &parsed) -> bool {
+		switch (event) {
+		case json::parse_event_t::object_start:
+		case json::parse_event_t::array_start: {
+			std::string name;
+			if (!stack.empty())
+				name = stack.back().array ? "[]" : stack.back().last_key;
+			stack.push_back(
+				{ name, {}, {}, event == json::parse_event_t::array_start });
+			break;
+		}
+		case json::parse_event_t::object_end:
+		case json::parse_event_t::array_end:
+			if (!stack.empty())
+				stack.pop_back();
+			break;
+		case json::parse_event_t::key: {
+			if (stack.empty() || !parsed.is_string())
+				break;
+			const std::string key = parsed.get<std::string>();
+			if (!stack.back().keys.insert(key).second) {
+				std::string path;
+				for (std::size_t i = 1; i < stack.size(); ++i)
+					path += (path.empty() || stack[i].name == "[]" ? "" : ".") +
+						stack[i].name;
+				path += (path.empty() ? "" : ".") + key;
+				duplicates.push_back(path + ": duplicate key (the last value would "
+							    "silently replace the earlier one)");
+			}
+			stack.back().last_key = key;
+			break;
+		}
+		case json::parse_event_t::value:
+			break;
+		}
+		return true;
+	};
+
+	try {
+		*doc = json::parse(text, callback, true, /*ignore_comments=*/true);
+	} catch (const json::parse_error &e) {
+		/* "[json.exception.parse_error.101] parse error at line 12, column 5: msg" */
+		const std::string what = e.what();
+		const std::size_t line = what.find("line ");
+		const std::size_t colon = line == std::string::npos ? line : what.find(": ", line);
+		if (line != std::string::npos && colon != std::string::npos) {
+			errors->push_back(source + ": " + what.substr(line, colon - line) + ": " +
+					  what.substr(colon + 2));
+		} else {
+			/* No position in the message: count lines up to the byte offset. */
+			const std::size_t end = std::min<std::size_t>(e.byte, text.size());
+			std::size_t ln = 1, col = 1;
+			for (std::size_t i = 0; i + 1 < end; ++i) {
+				if (text[i] == '\n') {
+					++ln;
+					col = 1;
+				} else {
+					++col;
+				}
+			}
+			errors->push_back(source + ": line " + std::to_string(ln) + ", column " +
+					  std::to_string(col) + ": " + what);
+		}
+		return false;
+	}
+	if (!doc->is_object()) {
+		errors->push_back(source + ": the top level must be an object {...}, got " +
+				  describe(*doc));
+		return false;
+	}
+	errors->insert(errors->end(), duplicates.begin(), duplicates.end());
+	return true;
+}
+
+ConfigResult parseWithSource(const std::string &json_text, const std::string &base_dir,
+			     const std::string &source)
+{
+	ConfigResult result;
+	json doc;
+	if (!parseDocument(json_text, source, &doc, &result.errors))
+		return result;
+
+	std::error_code ec;
+	fs::path base = base_dir.empty() ? fs::current_path(ec) : fs::absolute(base_dir, ec);
+	if (ec)
+		base = fs::path(base_dir);
+	Checker checker(base.lexically_normal());
+
+	BoardConfig &cfg = result.config;
+	Section top(&checker, &doc, "");
+	const Got board = getString(top, "board", &cfg.board);
+	if (board == Got::Absent)
+		top.missing("board", "required key is missing (the board's name, e.g. \"sim\")");
+	else if (board == Got::Ok && cfg.board.empty())
+		checker.fail("board", "must not be empty (the board's name, e.g. \"sim\")");
+
+	Section camera = subsection(top, "camera", true);
+	readCamera(camera, &cfg.camera);
+	Section strobe = subsection(top, "strobe", true);
+	readStrobe(strobe, &cfg.strobe);
+	Section can = subsection(top, "can", true);
+	readCan(can, &cfg.can);
+	Section pipeline = subsection(top, "pipeline", true);
+	readPipeline(pipeline, &cfg.pipeline);
+	Section systemd = subsection(top, "systemd", false);
+	getBool(systemd, "notify", &cfg.systemd.notify);
+	systemd.finish();
+	top.finish();
+
+	std::vector<std::string> errors = checker.take();
+	result.errors.insert(result.errors.end(), errors.begin(), errors.end());
+	return result;
+}
+
+} /* namespace */
+
+ConfigResult parseBoardConfig(const std::string &json_text, const std::string &base_dir)
+{
+	return parseWithSource(json_text, base_dir, "<text>");
+}
+
+ConfigResult loadBoardConfig(const std::string &path)
+{
+	std::string text;
+	const std::string error = readFileContents(path, &text);
+	if (!error.empty()) {
+		ConfigResult result;
+		result.config.path = path;
+		result.errors.push_back(error);
+		return result;
+	}
+	std::error_code ec;
+	fs::path dir = fs::absolute(fs::path(path), ec).parent_path();
+	if (ec)
+		dir = fs::path(path).parent_path();
+	ConfigResult result = parseWithSource(text, dir.string(), path);
+	result.config.path = path;
+	return result;
+}
+
+} /* namespace dockpose::firmware */
