@@ -1,0 +1,631 @@
+/* SPDX-License-Identifier: MIT */
+#include "firmware/daemon.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "algo/ambient.h"
+#include "algo/io/model_json.h"
+#include "hal/clock.h"
+
+namespace dockpose::firmware {
+
+namespace {
+
+constexpr std::int64_t kNsPerMs = 1000000;
+constexpr std::int64_t kNsPerS = 1000000000;
+/* How long an event's fault bit stays set after the event. */
+constexpr std::int64_t kFaultHoldNs = 1 * kNsPerS;
+/* Wait slice of the frame loop: commands, heartbeat and watchdog are served at least this often. */
+constexpr int kWaitSliceMs = 20;
+/* A stalled camera is restarted at most this often. */
+constexpr std::int64_t kRestartIntervalNs = 2 * kNsPerS;
+
+can::StrobeMode toCan(StrobeMode mode)
+{
+	switch (mode) {
+	case StrobeMode::Off:
+		return can::StrobeMode::Off;
+	case StrobeMode::Constant:
+		return can::StrobeMode::Constant;
+	case StrobeMode::Alternate:
+		return can::StrobeMode::Alternate;
+	}
+	return can::StrobeMode::Off;
+}
+
+can::TrackMode toCan(TrackMode mode)
+{
+	return mode == TrackMode::SearchOnly ? can::TrackMode::SearchOnly : can::TrackMode::Track;
+}
+
+hal::CanFrame toHal(const can::RawFrame &raw)
+{
+	hal::CanFrame frame;
+	frame.id = raw.id;
+	frame.len = raw.len;
+	std::copy(raw.data.begin(), raw.data.end(), frame.data.begin());
+	return frame;
+}
+
+PipelineConfig pipelineConfig(const PipelineSection &section)
+{
+	PipelineConfig config;
+	config.tracking = section.mode == TrackMode::Track;
+	config.correspondence.max_rms_px = section.max_rms_px;
+	config.correspondence.min_leds_search = section.min_leds_search;
+	config.correspondence.min_leds_track = section.min_leds_track;
+	return config;
+}
+
+} /* namespace */
+
+Daemon::Daemon(const BoardConfig &config, board::Backends backends, std::FILE *log)
+	: config_(config), backends_(std::move(backends)), log_(log),
+	  state_machine_(config.pipeline.lost_after_frames, config.pipeline.degraded_hold_frames),
+	  encoder_(config.can.base_id), command_decoder_(config.can.base_id), notifier_(config.systemd.notify),
+	  strobe_mode_(config.strobe.mode), track_mode_(config.pipeline.mode), exposure_us_(config.camera.exposure_us),
+	  gain_(config.camera.analogue_gain),
+	  period_ns_(static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz))
+{
+	/* The configuration was validated (both files load); a failure here is a bug upstream,
+	 * reported by start(). */
+	auto target = loadTargetModel(config_.pipeline.target);
+	auto intrinsics = loadCameraIntrinsics(config_.camera.intrinsics);
+	if (target.ok() && intrinsics.ok()) {
+		pipeline_ = std::make_unique<Pipeline>(target.value, intrinsics.value, pipelineConfig(config_.pipeline));
+		ambient_ = Image(intrinsics.value.width, intrinsics.value.height);
+		difference_ = Image(intrinsics.value.width, intrinsics.value.height);
+	}
+}
+
+Daemon::~Daemon()
+{
+	shutdown();
+}
+
+hal::Status Daemon::start()
+{
+	if (!pipeline_)
+		return hal::Status::error("cannot load " + config_.pipeline.target + " or " + config_.camera.intrinsics);
+	if (!backends_.strobe || !backends_.strobe_control || !backends_.camera || !backends_.can)
+		return hal::Status::error("board " + config_.board + ": wiring left a backend out");
+
+	/* LED off first: whatever happens next, it must not be left on. */
+	if (auto s = backends_.strobe->open(); !s)
+		return hal::Status::error("strobe: " + s.message());
+	if (auto s = backends_.strobe_control->start(); !s)
+		return hal::Status::error("strobe: " + s.message());
+
+	const hal::CanFilter commands{ config_.can.base_id + can::kCommand, 0x7ff, false };
+	hal::CanOptions can_options;
+	can_options.tx_queue_depth = config_.can.tx_queue_depth;
+	if (auto s = backends_.can->open(std::span<const hal::CanFilter>(&commands, 1), can_options); !s)
+		return hal::Status::error("can: " + s.message());
+
+	hal::CameraConfig camera;
+	camera.id = config_.camera.id;
+	camera.index = config_.camera.index;
+	camera.width = config_.camera.width;
+	camera.height = config_.camera.height;
+	camera.exposure_us = config_.camera.exposure_us;
+	camera.analogue_gain = config_.camera.analogue_gain;
+	camera.frame_duration_us = static_cast<int>(std::lround(1e6 / config_.camera.frame_rate_hz));
+	camera.buffer_count = config_.camera.buffer_count;
+	if (auto s = backends_.camera->configure(camera); !s)
+		return hal::Status::error("camera: " + s.message());
+	const auto &k = pipeline_->camera().intrinsics();
+	if (backends_.camera->width() != k.width || backends_.camera->height() != k.height)
+		return hal::Status::error("camera: delivers " + std::to_string(backends_.camera->width()) + "x" +
+					  std::to_string(backends_.camera->height()) + " frames but the intrinsics (" +
+					  config_.camera.intrinsics + ") are for " + std::to_string(k.width) + "x" +
+					  std::to_string(k.height));
+	if (auto s = backends_.camera->start(); !s)
+		return hal::Status::error("camera: " + s.message());
+
+	start_ns_ = hal::monotonicNs();
+	last_frame_ns_ = start_ns_;
+	rate_start_ns_ = start_ns_;
+	next_heartbeat_ns_ = start_ns_;
+	started_ = true;
+	applyStrobeMode(strobe_mode_);
+	std::fprintf(log_, "dockposed: board %s: camera %s, strobe %s (%s), can %s (base 0x%03x)\n",
+		     config_.board.c_str(), backends_.camera->name().c_str(), backends_.strobe->name().c_str(),
+		     strobeModeName(strobe_mode_), backends_.can->name().c_str(), config_.can.base_id);
+	notifier_.ready();
+	return hal::Status::ok();
+}
+
+int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
+{
+	if (!started_)
+		return 1;
+	const std::int64_t end_ns = run_for_s > 0 ? start_ns_ + static_cast<std::int64_t>(run_for_s * 1e9) : 0;
+	int exit_status = 0;
+
+	while (!stop_requested.load(std::memory_order_relaxed)) {
+		std::int64_t now_ns = hal::monotonicNs();
+		if (end_ns && now_ns >= end_ns)
+			break;
+
+		backends_.strobe_control->kick();
+		handleCommands();
+
+		hal::Frame frame;
+		const hal::WaitResult result = backends_.camera->waitFrame(&frame, kWaitSliceMs);
+		now_ns = hal::monotonicNs();
+		if (result == hal::WaitResult::Frame) {
+			handleFrame(frame, now_ns);
+			backends_.camera->releaseFrame(frame);
+		} else if (result == hal::WaitResult::Stopped) {
+			std::fprintf(log_, "dockposed: the camera has no more frames\n");
+			break;
+		} else {
+			if (result == hal::WaitResult::Error && !camera_failed_) {
+				camera_failed_ = true;
+				std::fprintf(log_, "dockposed: camera error: %s\n", backends_.camera->lastError().c_str());
+			}
+			handleStall(now_ns);
+		}
+
+		if (now_ns >= next_heartbeat_ns_)
+			sendHeartbeat(now_ns);
+		backends_.can->poll();
+		notifier_.watchdog(now_ns);
+		updateSystemdStatus(now_ns);
+	}
+
+	if (camera_failed_ && stalled_)
+		exit_status = 1;
+	stats_.run_s = static_cast<double>(hal::monotonicNs() - start_ns_) * 1e-9;
+	shutdown();
+	return exit_status;
+}
+
+void Daemon::shutdown()
+{
+	if (shut_down_ || !started_)
+		return;
+	shut_down_ = true;
+	notifier_.stopping();
+
+	/* LED off before anything else can fail. */
+	backends_.strobe_control->stop();
+	backends_.strobe->forceOff();
+
+	const SensorState before = state_machine_.state();
+	state_machine_.shutdown();
+	logState(before, state_machine_.state(), last_sequence_);
+	can::StatusData status;
+	status.state = can::SensorState::Shutdown;
+	status.enabled = enabled_;
+	status.strobe = can::StrobeMode::Off;
+	status.faults = last_faults_;
+	can::RawFrame frames[6];
+	const int n = encoder_.encodeReport(status, nullptr, frames);
+	sendFrames(frames, n);
+	/* Give the last frames a moment to leave a busy queue, without hanging. */
+	for (int i = 0; i < 50 && backends_.can->stats().tx_queued > 0; ++i) {
+		backends_.can->poll();
+		timespec ts{ 0, 2 * kNsPerMs };
+		nanosleep(&ts, nullptr);
+	}
+	backends_.can->poll();
+
+	backends_.camera->stop();
+	backends_.can->close();
+	backends_.strobe->close();
+}
+
+void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
+{
+	++stats_.frames;
+	++rate_frames_;
+	if (stalled_) {
+		std::fprintf(log_, "dockposed: frames again after a stall (frame %llu)\n",
+			     static_cast<unsigned long long>(frame.sequence));
+		stalled_ = false;
+		camera_failed_ = false;
+		applyStrobeMode(strobe_mode_);
+	}
+	last_frame_ns_ = now_ns;
+
+	if (have_sequence_ && frame.sequence > last_sequence_ + 1)
+		stats_.sequence_gaps += frame.sequence - last_sequence_ - 1;
+	have_sequence_ = true;
+	last_sequence_ = frame.sequence;
+
+	/* Behind by more than two frame periods: the loop cannot keep up. */
+	if (frame.timestamp_ns > 0 && now_ns - frame.timestamp_ns > 2 * period_ns_ + frame.exposure_us * 1000LL)
+		overrun_until_ns_ = now_ns + kFaultHoldNs;
+
+	const auto &k = pipeline_->camera().intrinsics();
+	if (!frame.image.valid() || frame.image.width != k.width || frame.image.height != k.height) {
+		if (stats_.frames_bad++ == 0)
+			std::fprintf(log_, "dockposed: rejecting a %dx%d frame (expected %dx%d); counting further ones\n",
+				     frame.image.width, frame.image.height, k.width, k.height);
+		return;
+	}
+
+	if (strobe_mode_ == StrobeMode::Alternate)
+		scheduleAlternatePulses(frame);
+
+	const std::int64_t exposure_end_ns = frame.timestamp_ns + static_cast<std::int64_t>(frame.exposure_us) * 1000;
+	const hal::Lighting lighting = backends_.strobe_control->lighting(frame.timestamp_ns, exposure_end_ns);
+	switch (lighting) {
+	case hal::Lighting::Lit:
+		++stats_.frames_lit;
+		break;
+	case hal::Lighting::Unlit:
+		++stats_.frames_unlit;
+		break;
+	case hal::Lighting::Mixed:
+		++stats_.frames_mixed;
+		break;
+	}
+
+	if (!enabled_) {
+		processView(ImageView{}, frame);
+		return;
+	}
+
+	switch (strobe_mode_) {
+	case StrobeMode::Off:
+		processView(frame.image, frame);
+		break;
+	case StrobeMode::Constant:
+		if (lighting == hal::Lighting::Lit)
+			processView(frame.image, frame);
+		break;
+	case StrobeMode::Alternate:
+		if (lighting == hal::Lighting::Unlit) {
+			for (int y = 0; y < frame.image.height; ++y)
+				std::memcpy(ambient_.data() + static_cast<std::ptrdiff_t>(y) * ambient_.width(),
+					    frame.image.row(y), static_cast<std::size_t>(frame.image.width));
+			ambient_sequence_ = frame.sequence;
+			have_ambient_ = true;
+		} else if (lighting == hal::Lighting::Lit && have_ambient_ &&
+			   frame.sequence - ambient_sequence_ <= 2) {
+			subtractAmbient(frame.image, ambient_.view(), difference_.data(), difference_.width());
+			processView(difference_.view(), frame);
+		}
+		break;
+	}
+}
+
+void Daemon::processView(const ImageView &view, const hal::Frame &frame)
+{
+	const PoseResult *result = nullptr;
+	if (view.valid()) {
+		if (track_mode_ == TrackMode::SearchOnly)
+			pipeline_->reset();
+		const std::int64_t t0_ns = hal::monotonicNs();
+		result = &pipeline_->process(view);
+		stats_.pipeline.add(hal::monotonicNs() - t0_ns);
+		++stats_.processed;
+	}
+
+	const std::int64_t now_ns = hal::monotonicNs();
+	const std::uint8_t faults = activeFaults(now_ns);
+	bool pose_valid = result && result->found && enabled_;
+
+	const SensorState before = state_machine_.state();
+	const SensorState state = state_machine_.update({ pose_valid, faults });
+	if (state == SensorState::Fault)
+		pose_valid = false;
+	logState(before, state, frame.sequence);
+
+	can::StatusData status;
+	status.state = state;
+	status.enabled = enabled_;
+	status.pose_valid = pose_valid;
+	status.tracked = pose_valid && result->tracked;
+	status.strobe = toCan(strobe_mode_);
+	status.leds_used = result ? result->leds_used : 0;
+	status.rms_px = result ? result->rms_px : 0.0;
+	status.faults = faults;
+
+	can::PoseData pose;
+	if (pose_valid) {
+		pose.frame_counter = static_cast<std::uint32_t>(frame.sequence);
+		for (int i = 0; i < 3; ++i) {
+			pose.t_mm[i] = result->t_mm[i];
+			pose.rpy_deg[i] = result->rpy_deg[i];
+			pose.sigma_t_mm[i] = result->sigma_t_mm[i];
+			pose.sigma_rpy_deg[i] = result->sigma_rpy_deg[i];
+		}
+		pose.q[0] = result->q.w();
+		pose.q[1] = result->q.x();
+		pose.q[2] = result->q.y();
+		pose.q[3] = result->q.z();
+	}
+
+	/* Latency up to this send, from the start of the exposure. */
+	const std::int64_t send_ns = hal::monotonicNs();
+	const std::int64_t latency_ns = frame.timestamp_ns > 0 ? send_ns - frame.timestamp_ns : 0;
+	status.latency_ms = static_cast<double>(latency_ns) * 1e-6;
+
+	can::RawFrame frames[6];
+	const int n = encoder_.encodeReport(status, pose_valid ? &pose : nullptr, frames);
+	sendFrames(frames, n);
+	++stats_.reports;
+	if (n > 1)
+		++stats_.poses_valid;
+	stats_.latency.add(latency_ns);
+}
+
+void Daemon::scheduleAlternatePulses(const hal::Frame &frame)
+{
+	if (frame.timestamp_ns <= 0)
+		return;
+	/* Light every even frame: aim a pulse at the predicted exposure of the next even frames
+	 * that are not yet scheduled. The exposure grid comes from the sensor's own timestamps. */
+	const std::int64_t margin_ns = static_cast<std::int64_t>(config_.strobe.pulse_margin_us) * 1000;
+	const std::int64_t exposure_ns = static_cast<std::int64_t>(frame.exposure_us) * 1000;
+	for (std::uint64_t k = 1; k <= 3; ++k) {
+		const std::uint64_t target = frame.sequence + k;
+		if (target % 2 != 0 || (last_scheduled_sequence_ && target <= last_scheduled_sequence_))
+			continue;
+		const std::int64_t start_ns = frame.timestamp_ns + static_cast<std::int64_t>(k) * period_ns_ - margin_ns;
+		if (backends_.strobe_control->schedulePulse(start_ns, exposure_ns + 2 * margin_ns))
+			last_scheduled_sequence_ = target;
+	}
+}
+
+void Daemon::handleStall(std::int64_t now_ns)
+{
+	const std::int64_t stall_ns = static_cast<std::int64_t>(config_.camera.stall_timeout_ms) * kNsPerMs;
+	if (!camera_failed_ && now_ns - last_frame_ns_ < stall_ns)
+		return;
+	if (!stalled_) {
+		stalled_ = true;
+		++stats_.stalls;
+		std::fprintf(log_, "dockposed: %s: no frame for %lld ms; LED off\n",
+			     camera_failed_ ? "camera failed" : "camera stalls",
+			     static_cast<long long>((now_ns - last_frame_ns_) / kNsPerMs));
+		backends_.strobe_control->setOn(false);
+		have_ambient_ = false;
+		last_stall_report_ns_ = 0;
+		last_restart_ns_ = now_ns;
+	}
+	/* Status keeps coming, at the heartbeat rate, so the controller sees the fault. */
+	const std::int64_t interval_ns = kNsPerS / std::max(1, config_.can.heartbeat_hz);
+	if (now_ns - last_stall_report_ns_ >= interval_ns) {
+		sendStatusOnly(now_ns);
+		last_stall_report_ns_ = now_ns;
+	}
+	/* Try to bring the camera back. */
+	if (now_ns - last_restart_ns_ >= kRestartIntervalNs) {
+		last_restart_ns_ = now_ns;
+		backends_.camera->stop();
+		if (auto s = backends_.camera->start(); s) {
+			++stats_.camera_restarts;
+			std::fprintf(log_, "dockposed: camera restarted\n");
+		} else {
+			std::fprintf(log_, "dockposed: camera restart failed: %s\n", s.message().c_str());
+		}
+	}
+}
+
+void Daemon::sendStatusOnly(std::int64_t now_ns)
+{
+	const std::uint8_t faults = activeFaults(now_ns);
+	const SensorState before = state_machine_.state();
+	const SensorState state = state_machine_.update({ false, faults });
+	logState(before, state, last_sequence_);
+	can::StatusData status;
+	status.state = state;
+	status.enabled = enabled_;
+	status.strobe = toCan(strobe_mode_);
+	status.faults = faults;
+	can::RawFrame frames[6];
+	const int n = encoder_.encodeReport(status, nullptr, frames);
+	sendFrames(frames, n);
+	++stats_.stall_reports;
+}
+
+void Daemon::sendHeartbeat(std::int64_t now_ns)
+{
+	next_heartbeat_ns_ = now_ns + kNsPerS / std::max(1, config_.can.heartbeat_hz);
+	if (now_ns - rate_start_ns_ >= kNsPerS) {
+		frame_rate_hz_ = static_cast<double>(rate_frames_) * 1e9 / static_cast<double>(now_ns - rate_start_ns_);
+		rate_frames_ = 0;
+		rate_start_ns_ = now_ns;
+	}
+	can::HeartbeatData hb;
+	hb.uptime_s = static_cast<std::uint32_t>((now_ns - start_ns_) / kNsPerS);
+	hb.state = state_machine_.state();
+	hb.mode = toCan(track_mode_);
+	hb.strobe = toCan(strobe_mode_);
+	hb.enabled = enabled_;
+	hb.faults = activeFaults(now_ns);
+	hb.frame_rate_hz = frame_rate_hz_;
+	const can::RawFrame frame = encoder_.encodeHeartbeat(hb);
+	sendFrames(&frame, 1);
+	++stats_.heartbeats;
+}
+
+void Daemon::sendFrames(const can::RawFrame *frames, int count)
+{
+	for (int i = 0; i < count; ++i)
+		if (!backends_.can->send(toHal(frames[i])))
+			++stats_.can_send_drops;
+}
+
+void Daemon::handleCommands()
+{
+	hal::CanFrame in;
+	while (backends_.can->receive(&in)) {
+		can::RawFrame raw;
+		raw.id = in.id;
+		raw.len = in.len;
+		std::copy_n(in.data.begin(), std::min<std::size_t>(in.len, raw.data.size()), raw.data.begin());
+		const can::Decoder::Event event = command_decoder_.feed(raw);
+		if (event == can::Decoder::Event::Command) {
+			applyCommand(command_decoder_.command());
+		} else if (event == can::Decoder::Event::Rejected) {
+			++stats_.commands_rejected;
+			command_rejected_until_ns_ = hal::monotonicNs() + kFaultHoldNs;
+			std::fprintf(log_, "dockposed: command frame 0x%03x rejected: %s\n", in.id,
+				     can::frameErrorName(command_decoder_.lastError()));
+		}
+	}
+}
+
+void Daemon::applyCommand(const can::CommandData &command)
+{
+	/* Check before changing anything: a command is applied whole or not at all. */
+	const int exposure_us = command.exposure_us ? command.exposure_us : exposure_us_;
+	const double gain = command.gain > 0 ? command.gain : gain_;
+	const double period_us = 1e6 / config_.camera.frame_rate_hz;
+	if (exposure_us < 10 || exposure_us > period_us || gain < 1.0 || gain > 64.0) {
+		++stats_.commands_rejected;
+		command_rejected_until_ns_ = hal::monotonicNs() + kFaultHoldNs;
+		std::fprintf(log_, "dockposed: command rejected: exposure %d us / gain %.1f outside [10, %.0f] us / [1, 64]\n",
+			     exposure_us, gain, period_us);
+		return;
+	}
+	++stats_.commands;
+
+	if (exposure_us != exposure_us_ || gain != gain_) {
+		if (auto s = backends_.camera->setControls(exposure_us, gain); s) {
+			exposure_us_ = exposure_us;
+			gain_ = gain;
+		} else {
+			std::fprintf(log_, "dockposed: camera controls: %s\n", s.message().c_str());
+		}
+	}
+	const TrackMode mode = command.mode == can::TrackMode::SearchOnly ? TrackMode::SearchOnly : TrackMode::Track;
+	StrobeMode strobe = strobe_mode_;
+	switch (command.strobe) {
+	case can::StrobeMode::Off:
+		strobe = StrobeMode::Off;
+		break;
+	case can::StrobeMode::Constant:
+		strobe = StrobeMode::Constant;
+		break;
+	case can::StrobeMode::Alternate:
+		strobe = StrobeMode::Alternate;
+		break;
+	case can::StrobeMode::Unchanged:
+		break;
+	}
+	const bool changed = command.enable != enabled_ || mode != track_mode_ || strobe != strobe_mode_;
+	enabled_ = command.enable;
+	if (mode != track_mode_) {
+		track_mode_ = mode;
+		pipeline_->reset();
+	}
+	if (changed) {
+		std::fprintf(log_, "dockposed: command: %s, %s, strobe %s, exposure %d us, gain %.1f\n",
+			     enabled_ ? "enabled" : "disabled", mode == TrackMode::Track ? "track" : "search only",
+			     strobeModeName(strobe), exposure_us_, gain_);
+	}
+	applyStrobeMode(strobe);
+}
+
+void Daemon::applyStrobeMode(StrobeMode mode)
+{
+	strobe_mode_ = mode;
+	have_ambient_ = false;
+	last_scheduled_sequence_ = 0;
+	hal::StrobeController &control = *backends_.strobe_control;
+	if (!enabled_ || stalled_) {
+		control.setOn(false);
+		return;
+	}
+	switch (mode) {
+	case StrobeMode::Off:
+		control.setOn(false);
+		break;
+	case StrobeMode::Constant:
+		control.setOn(true);
+		break;
+	case StrobeMode::Alternate:
+		control.setOn(false); /* pulses are scheduled frame by frame */
+		break;
+	}
+}
+
+std::uint8_t Daemon::activeFaults(std::int64_t now_ns)
+{
+	const hal::CameraStats camera = backends_.camera->stats();
+	if (camera.dropped != seen_camera_drops_) {
+		seen_camera_drops_ = camera.dropped;
+		frames_dropped_until_ns_ = now_ns + kFaultHoldNs;
+	}
+	const hal::CanStats can_stats = backends_.can->stats();
+	if (can_stats.tx_dropped != seen_can_drops_) {
+		seen_can_drops_ = can_stats.tx_dropped;
+		can_overflow_until_ns_ = now_ns + kFaultHoldNs;
+	}
+	const std::uint64_t strobe_errors = backends_.strobe_control->errorCount();
+	if (strobe_errors != seen_strobe_errors_) {
+		seen_strobe_errors_ = strobe_errors;
+		strobe_error_until_ns_ = now_ns + kFaultHoldNs;
+	}
+
+	std::uint8_t faults = 0;
+	if (stalled_ && !camera_failed_)
+		faults |= can::fault::kCameraStall;
+	if (camera_failed_)
+		faults |= can::fault::kCameraError;
+	if (now_ns < strobe_error_until_ns_ || backends_.strobe_control->stalled())
+		faults |= can::fault::kStrobeError;
+	if (now_ns < can_overflow_until_ns_)
+		faults |= can::fault::kCanTxOverflow;
+	if (can_stats.state == hal::CanState::BusOff)
+		faults |= can::fault::kCanBusOff;
+	if (now_ns < frames_dropped_until_ns_)
+		faults |= can::fault::kFramesDropped;
+	if (now_ns < overrun_until_ns_)
+		faults |= can::fault::kLoopOverrun;
+	if (now_ns < command_rejected_until_ns_)
+		faults |= can::fault::kCommandRejected;
+	last_faults_ = faults;
+	return faults;
+}
+
+void Daemon::logState(SensorState before, SensorState after, std::uint64_t sequence)
+{
+	if (before == after)
+		return;
+	std::fprintf(log_, "dockposed: %s -> %s (frame %llu)\n", can::sensorStateName(before),
+		     can::sensorStateName(after), static_cast<unsigned long long>(sequence));
+}
+
+void Daemon::updateSystemdStatus(std::int64_t now_ns)
+{
+	if (!notifier_.active() || now_ns - last_systemd_status_ns_ < kNsPerS)
+		return;
+	last_systemd_status_ns_ = now_ns;
+	char text[160];
+	std::snprintf(text, sizeof(text), "%s, %.1f frames/s, %llu poses, latency p50 %.2f ms",
+		      can::sensorStateName(state_machine_.state()), frame_rate_hz_,
+		      static_cast<unsigned long long>(stats_.poses_valid), stats_.latency.quantileMs(0.5));
+	notifier_.status(text);
+}
+
+void Daemon::printSummary(std::FILE *out) const
+{
+	const hal::CameraStats camera = backends_.camera->stats();
+	const hal::CanStats can_stats = backends_.can->stats();
+	std::fprintf(out,
+		     "dockposed: %.1f s: %llu frames (%.1f/s; lit %llu, unlit %llu, mixed %llu, dropped %llu), "
+		     "%llu reports, %llu valid poses; latency p50 %.2f ms, p99 %.2f ms, max %.2f ms; "
+		     "pipeline p50 %.2f ms; CAN %llu frames sent, %llu dropped\n",
+		     stats_.run_s, static_cast<unsigned long long>(stats_.frames),
+		     stats_.run_s > 0 ? static_cast<double>(stats_.frames) / stats_.run_s : 0.0,
+		     static_cast<unsigned long long>(stats_.frames_lit),
+		     static_cast<unsigned long long>(stats_.frames_unlit),
+		     static_cast<unsigned long long>(stats_.frames_mixed),
+		     static_cast<unsigned long long>(camera.dropped), static_cast<unsigned long long>(stats_.reports),
+		     static_cast<unsigned long long>(stats_.poses_valid), stats_.latency.quantileMs(0.5),
+		     stats_.latency.quantileMs(0.99), stats_.latency.maxMs(), stats_.pipeline.quantileMs(0.5),
+		     static_cast<unsigned long long>(can_stats.tx_frames),
+		     static_cast<unsigned long long>(can_stats.tx_dropped));
+}
+
+} /* namespace dockpose::firmware */

@@ -1,0 +1,167 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Daemon: the sensor. It owns a board's backends (board/board.h), the vision
+ * pipeline and the CAN protocol, and runs the frame loop:
+ *
+ *   camera frame ─► lit / unlit / mixed (strobe history vs. exposure window)
+ *                ─► [alternate: lit − last unlit] ─► Pipeline ─► state machine
+ *                ─► pose frames + status frame on CAN (latency measured from
+ *                   the sensor timestamp to the send)
+ *
+ * and between frames: command frames from the arm controller, the heartbeat,
+ * the systemd watchdog, the strobe's dead-man switch, and stall detection
+ * (no frame for camera.stall_timeout_ms: state fault, LED off, status frames
+ * keep coming at the heartbeat rate, and the camera is restarted).
+ *
+ * A wrong pose is worse than no pose: a pose is only sent as valid when the
+ * pipeline found it, the state is not fault, and it fits the protocol's ranges.
+ *
+ * Allocates: the constructor and start() allocate every buffer (pipeline,
+ * ambient frame, difference frame); the frame loop does not allocate except
+ * in log lines on state changes and in systemd status text (once a second).
+ */
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+
+#include "algo/image.h"
+#include "algo/pipeline.h"
+#include "board/board.h"
+#include "firmware/config.h"
+#include "firmware/latency_histogram.h"
+#include "firmware/protocol/dockpose_can.h"
+#include "firmware/state_machine.h"
+#include "firmware/systemd_notify.h"
+
+namespace dockpose::firmware {
+
+struct DaemonStats {
+	std::uint64_t frames = 0;		/* frames from the camera */
+	std::uint64_t frames_lit = 0;
+	std::uint64_t frames_unlit = 0;
+	std::uint64_t frames_mixed = 0;		/* exposure straddled a strobe switch: not used */
+	std::uint64_t frames_bad = 0;		/* wrong size / invalid view: rejected */
+	std::uint64_t sequence_gaps = 0;	/* frames the sensor numbered but we never saw */
+	std::uint64_t processed = 0;		/* frames that went through the pipeline */
+	std::uint64_t poses_valid = 0;		/* reports sent with a valid pose */
+	std::uint64_t reports = 0;		/* status frames sent for processed frames */
+	std::uint64_t stall_reports = 0;	/* status frames sent while the camera stalled */
+	std::uint64_t stalls = 0;		/* stall episodes */
+	std::uint64_t camera_restarts = 0;
+	std::uint64_t heartbeats = 0;
+	std::uint64_t commands = 0;		/* command frames applied */
+	std::uint64_t commands_rejected = 0;	/* command frames with bad CRC/length/values */
+	std::uint64_t can_send_drops = 0;	/* sends that dropped an older queued frame */
+	LatencyHistogram latency;		/* sensor timestamp -> CAN send, per report */
+	LatencyHistogram pipeline;		/* time in Pipeline::process, per processed frame */
+	double run_s = 0.0;
+};
+
+class Daemon
+{
+public:
+	/* Takes the (unopened) backends of a validated configuration. Allocates. */
+	Daemon(const BoardConfig &config, board::Backends backends, std::FILE *log = stderr);
+	~Daemon();
+	Daemon(const Daemon &) = delete;
+	Daemon &operator=(const Daemon &) = delete;
+
+	/* Open the strobe (LED off), the CAN bus, configure and start the camera. */
+	hal::Status start();
+
+	/*
+	 * The frame loop, until stop_requested becomes true, the camera ends (replay
+	 * without loop), or run_for_s seconds passed (0: no limit); then a clean
+	 * shutdown (LED off, a last status frame with state shutdown). Returns the
+	 * process exit status: 0 after a clean run, 1 when the camera failed for good.
+	 */
+	int run(const std::atomic<bool> &stop_requested, double run_for_s = 0.0);
+
+	/* LED off, last status frame, close everything. Idempotent; run() calls it. */
+	void shutdown();
+
+	SensorState state() const { return state_machine_.state(); }
+	const DaemonStats &stats() const { return stats_; }
+	const PoseResult &lastPose() const { return pipeline_->last(); }
+	StrobeMode strobeMode() const { return strobe_mode_; }
+	TrackMode trackMode() const { return track_mode_; }
+	bool enabled() const { return enabled_; }
+	hal::Strobe *strobe() const { return backends_.strobe.get(); }
+
+	/* One line of totals (frames, poses, rate, latency, drops) for logs. */
+	void printSummary(std::FILE *out) const;
+
+private:
+	void handleFrame(const hal::Frame &frame, std::int64_t now_ns);
+	void processView(const ImageView &view, const hal::Frame &frame);
+	void scheduleAlternatePulses(const hal::Frame &frame);
+	void handleStall(std::int64_t now_ns);
+	void handleCommands();
+	void applyCommand(const can::CommandData &command);
+	void applyStrobeMode(StrobeMode mode);
+	void sendFrames(const can::RawFrame *frames, int count);
+	void sendStatusOnly(std::int64_t now_ns);
+	void sendHeartbeat(std::int64_t now_ns);
+	std::uint8_t activeFaults(std::int64_t now_ns);
+	void logState(SensorState before, SensorState after, std::uint64_t sequence);
+	void updateSystemdStatus(std::int64_t now_ns);
+
+	BoardConfig config_;
+	board::Backends backends_;
+	std::FILE *log_;
+	std::unique_ptr<Pipeline> pipeline_;
+	StateMachine state_machine_;
+	can::Encoder encoder_;
+	can::Decoder command_decoder_;
+	SystemdNotifier notifier_;
+	DaemonStats stats_;
+
+	/* Settings the arm controller can change. */
+	bool enabled_ = true;
+	StrobeMode strobe_mode_;
+	TrackMode track_mode_;
+	int exposure_us_;
+	double gain_;
+
+	/* Alternate mode: the last unlit frame and the difference image. */
+	Image ambient_;
+	std::uint64_t ambient_sequence_ = 0;
+	bool have_ambient_ = false;
+	Image difference_;
+	std::uint64_t last_scheduled_sequence_ = 0;
+	std::int64_t period_ns_;
+
+	/* Frame bookkeeping. */
+	bool have_sequence_ = false;
+	std::uint64_t last_sequence_ = 0;
+	std::int64_t last_frame_ns_ = 0;
+	std::int64_t start_ns_ = 0;
+	bool stalled_ = false;
+	bool camera_failed_ = false;
+	std::int64_t last_stall_report_ns_ = 0;
+	std::int64_t last_restart_ns_ = 0;
+	std::int64_t next_heartbeat_ns_ = 0;
+	std::int64_t last_systemd_status_ns_ = 0;
+	std::uint64_t rate_frames_ = 0;
+	std::int64_t rate_start_ns_ = 0;
+	double frame_rate_hz_ = 0.0;
+
+	/* Fault bookkeeping: events keep their bit for a while after they happen. */
+	std::uint64_t seen_camera_drops_ = 0;
+	std::uint64_t seen_can_drops_ = 0;
+	std::uint64_t seen_strobe_errors_ = 0;
+	std::int64_t frames_dropped_until_ns_ = 0;
+	std::int64_t can_overflow_until_ns_ = 0;
+	std::int64_t strobe_error_until_ns_ = 0;
+	std::int64_t command_rejected_until_ns_ = 0;
+	std::int64_t overrun_until_ns_ = 0;
+	std::uint8_t last_faults_ = 0;
+
+	bool started_ = false;
+	bool shut_down_ = false;
+};
+
+} /* namespace dockpose::firmware */

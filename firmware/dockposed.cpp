@@ -1,0 +1,162 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * dockposed: the docking-sensor daemon.
+ *
+ *   dockposed --board board/sim/board.json [--for SECONDS] [--can-log FILE]
+ *
+ * Exit status: 0 after a clean run (SIGTERM/SIGINT, --for elapsed, replay
+ * finished), 1 when the hardware failed (a backend could not start, the camera
+ * failed for good), 2 for a bad command line or board file.
+ */
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "board/board.h"
+#include "firmware/config.h"
+#include "firmware/daemon.h"
+
+namespace {
+
+std::atomic<bool> g_stop{ false };
+/* For fatal signals: the LED goes off before the process dies. */
+dockpose::hal::Strobe *g_strobe = nullptr;
+
+void onStopSignal(int)
+{
+	g_stop.store(true);
+}
+
+void onFatalSignal(int sig)
+{
+	if (g_strobe)
+		g_strobe->forceOff();
+	/* SA_RESETHAND restored the default action: die of the same signal. */
+	raise(sig);
+}
+
+void installSignalHandlers()
+{
+	struct sigaction stop {};
+	stop.sa_handler = onStopSignal;
+	sigemptyset(&stop.sa_mask);
+	for (int sig : { SIGTERM, SIGINT, SIGHUP })
+		sigaction(sig, &stop, nullptr);
+
+	struct sigaction fatal {};
+	fatal.sa_handler = onFatalSignal;
+	sigemptyset(&fatal.sa_mask);
+	fatal.sa_flags = static_cast<int>(SA_RESETHAND);
+	for (int sig : { SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT })
+		sigaction(sig, &fatal, nullptr);
+
+	std::signal(SIGPIPE, SIG_IGN);
+}
+
+bool contains(std::span<const char *const> names, const std::string &name)
+{
+	for (const char *n : names)
+		if (name == n)
+			return true;
+	return false;
+}
+
+std::string join(std::span<const char *const> names)
+{
+	std::string out;
+	for (const char *n : names)
+		out += (out.empty() ? "" : ", ") + std::string(n);
+	return out;
+}
+
+} /* namespace */
+
+int main(int argc, char **argv)
+{
+	using namespace dockpose;
+
+	CLI::App app{ "dockposed: LED-target docking sensor (pose on CAN)" };
+	std::string board_path;
+	double run_for_s = 0.0;
+	std::string can_log;
+	app.add_option("--board", board_path, "the board's configuration file (board/<name>/board.json)")->required();
+	app.add_option("--for", run_for_s, "run this many seconds, then shut down cleanly (0: until SIGTERM)")
+		->check(CLI::NonNegativeNumber);
+	app.add_option("--can-log", can_log, "write CAN frames to this candump log (boards whose CAN backend is 'file')");
+	try {
+		app.parse(argc, argv);
+	} catch (const CLI::ParseError &e) {
+		return app.exit(e) == 0 ? 0 : 2;
+	}
+
+	firmware::ConfigResult loaded = firmware::loadBoardConfig(board_path);
+	if (!loaded.ok()) {
+		std::fprintf(stderr, "dockposed: %s: %zu error(s) in the board file:\n", board_path.c_str(),
+			     loaded.errors.size());
+		for (const std::string &e : loaded.errors)
+			std::fprintf(stderr, "  %s\n", e.c_str());
+		return 2;
+	}
+	firmware::BoardConfig &config = loaded.config;
+
+	const board::BoardInfo *info = board::findBoard(config.board);
+	if (!info) {
+		std::string built;
+		for (const board::BoardInfo &b : board::boards())
+			built += (built.empty() ? "" : ", ") + std::string(b.name);
+		std::fprintf(stderr, "dockposed: %s: board \"%s\" is not built into this dockposed (built: %s)\n",
+			     board_path.c_str(), config.board.c_str(), built.c_str());
+		return 2;
+	}
+	struct {
+		const char *section;
+		const std::string &value;
+		std::span<const char *const> allowed;
+	} const backends[] = {
+		{ "camera.backend", config.camera.backend, info->cameras },
+		{ "strobe.backend", config.strobe.backend, info->strobes },
+		{ "can.backend", config.can.backend, info->cans },
+	};
+	bool wiring_ok = true;
+	for (const auto &b : backends) {
+		if (!contains(b.allowed, b.value)) {
+			std::fprintf(stderr, "dockposed: %s: %s: board %s has no \"%s\" backend (it has: %s)\n",
+				     board_path.c_str(), b.section, info->name, b.value.c_str(), join(b.allowed).c_str());
+			wiring_ok = false;
+		}
+	}
+	if (!wiring_ok)
+		return 2;
+	if (!can_log.empty()) {
+		if (config.can.backend != "file") {
+			std::fprintf(stderr, "dockposed: --can-log only applies to boards whose CAN backend is \"file\" "
+					     "(%s uses \"%s\")\n", info->name, config.can.backend.c_str());
+			return 2;
+		}
+		config.can.log_file = can_log;
+	}
+
+	board::Backends wired;
+	if (auto s = info->wire(config, &wired); !s) {
+		std::fprintf(stderr, "dockposed: board %s: %s\n", info->name, s.message().c_str());
+		return 1;
+	}
+
+	installSignalHandlers();
+	firmware::Daemon daemon(config, std::move(wired));
+	g_strobe = daemon.strobe();
+	if (auto s = daemon.start(); !s) {
+		std::fprintf(stderr, "dockposed: cannot start: %s\n", s.message().c_str());
+		daemon.shutdown();
+		g_strobe = nullptr;
+		return 1;
+	}
+	const int status = daemon.run(g_stop, run_for_s);
+	daemon.printSummary(stderr);
+	g_strobe = nullptr;
+	return status;
+}

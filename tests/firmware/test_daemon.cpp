@@ -1,0 +1,362 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The whole firmware on simulated backends: the synthetic camera rendering a
+ * docking approach at 60 frames/s in real time, the recording strobe, and an
+ * in-process CAN bus whose other end is the arm controller, decoding with the
+ * header-only decoder it would use (firmware/protocol/dockpose_can.h).
+ *
+ * No timing assertions on the machine's speed: rates are compared with the
+ * camera's own frame count, and poses with the trajectory's truth.
+ */
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "algo/io/model_json.h"
+#include "firmware/config.h"
+#include "firmware/daemon.h"
+#include "firmware/protocol/dockpose_can.h"
+#include "hal/clock.h"
+#include "hal/sim/loopback_can_bus.h"
+#include "hal/sim/recording_strobe.h"
+#include "hal/sim/synthetic_camera.h"
+
+namespace dockpose::firmware {
+namespace {
+
+using namespace std::chrono_literals;
+
+BoardConfig simConfig()
+{
+	ConfigResult loaded = loadBoardConfig(std::string(DOCKPOSE_SOURCE_DIR) + "/board/sim/board.json");
+	EXPECT_TRUE(loaded.ok()) << (loaded.errors.empty() ? "" : loaded.errors.front());
+	BoardConfig config = loaded.config;
+	config.can.backend = "loopback";
+	config.camera.frame_rate_hz = 60.0;
+	config.systemd.notify = false;
+	return config;
+}
+
+/* A test rig: the daemon on simulated backends, running in its own thread, and the
+ * controller's end of the bus. */
+class Rig
+{
+public:
+	explicit Rig(const BoardConfig &config, std::FILE *log = nullptr) : config_(config)
+	{
+		hub_ = std::make_shared<hal::LoopbackHub>();
+		board::Backends b;
+		auto strobe = std::make_unique<hal::RecordingStrobe>();
+		strobe_ = strobe.get();
+		b.strobe_control = std::make_unique<hal::StrobeController>(strobe.get(), config.camera.stall_timeout_ms);
+		b.strobe = std::move(strobe);
+
+		auto target = loadTargetModel(config.pipeline.target);
+		auto intrinsics = loadCameraIntrinsics(config.camera.intrinsics);
+		EXPECT_TRUE(target.ok() && intrinsics.ok());
+		const SyntheticCameraConfig &s = config.camera.synthetic;
+		hal::SyntheticScene scene{};
+		for (int i = 0; i < 6; ++i) {
+			scene.from[i] = s.from[i];
+			scene.to[i] = s.to[i];
+		}
+		scene.duration_s = s.duration_s;
+		scene.loop = s.loop;
+		scene.reflections = s.reflections;
+		scene.glints = s.glints;
+		scene.hot_pixels = s.hot_pixels;
+		scene.noise_sigma = s.noise_sigma;
+		scene.seed = s.seed;
+		auto camera = std::make_unique<hal::SyntheticCamera>(target.value, intrinsics.value, scene,
+								     b.strobe_control.get());
+		camera_ = camera.get();
+		b.camera = std::move(camera);
+		b.can = std::make_unique<hal::LoopbackCanBus>(hub_, "sensor");
+
+		log_ = log ? log : std::tmpfile();
+		daemon_ = std::make_unique<Daemon>(config, std::move(b), log_);
+
+		controller_ = std::make_unique<hal::LoopbackCanBus>(hub_, "controller");
+		const hal::CanFilter all{ 0, 0, false };
+		EXPECT_TRUE(controller_->open(std::span<const hal::CanFilter>(&all, 1), hal::CanOptions{}).isOk());
+	}
+
+	~Rig()
+	{
+		stop();
+	}
+
+	void start(double run_for_s = 0.0)
+	{
+		auto s = daemon_->start();
+		ASSERT_TRUE(s.isOk()) << s.message();
+		thread_ = std::thread([this, run_for_s] {
+			exit_status_ = daemon_->run(stop_, run_for_s);
+			finished_ = true;
+		});
+	}
+
+	void stop()
+	{
+		stop_ = true;
+		if (thread_.joinable())
+			thread_.join();
+		drain();
+	}
+
+	/* Decode everything the controller received so far. */
+	void drain()
+	{
+		hal::CanFrame f;
+		while (controller_->receive(&f)) {
+			can::RawFrame raw;
+			raw.id = f.id;
+			raw.len = f.len;
+			for (int i = 0; i < 8; ++i)
+				raw.data[static_cast<std::size_t>(i)] = f.data[static_cast<std::size_t>(i)];
+			switch (decoder_.feed(raw)) {
+			case can::Decoder::Event::Report:
+				reports_.push_back({ decoder_.status(), decoder_.poseValid(), decoder_.pose(),
+						     hal::monotonicNs() });
+				break;
+			case can::Decoder::Event::Heartbeat:
+				heartbeats_.push_back(decoder_.heartbeat());
+				break;
+			case can::Decoder::Event::Rejected:
+				++rejected_;
+				break;
+			default:
+				break;
+			}
+		}
+	}
+
+	/* Poll the controller's end until pred() holds or the timeout passes. */
+	template<typename Pred>
+	bool waitFor(Pred pred, std::chrono::milliseconds timeout)
+	{
+		const auto end = std::chrono::steady_clock::now() + timeout;
+		while (std::chrono::steady_clock::now() < end) {
+			drain();
+			if (pred())
+				return true;
+			std::this_thread::sleep_for(5ms);
+		}
+		drain();
+		return pred();
+	}
+
+	void sendCommand(const can::CommandData &command)
+	{
+		const can::RawFrame raw = command_encoder_.encodeCommand(command);
+		hal::CanFrame f;
+		f.id = raw.id;
+		f.len = raw.len;
+		for (int i = 0; i < 8; ++i)
+			f.data[static_cast<std::size_t>(i)] = raw.data[static_cast<std::size_t>(i)];
+		controller_->send(f);
+		controller_->poll();
+	}
+
+	struct Report {
+		can::StatusData status;
+		bool pose_valid;
+		can::PoseData pose;
+		std::int64_t received_ns;
+	};
+
+	BoardConfig config_;
+	std::shared_ptr<hal::LoopbackHub> hub_;
+	hal::RecordingStrobe *strobe_ = nullptr;
+	hal::SyntheticCamera *camera_ = nullptr;
+	std::FILE *log_ = nullptr;
+	std::unique_ptr<Daemon> daemon_;
+	std::unique_ptr<hal::LoopbackCanBus> controller_;
+	can::Decoder decoder_{ can::kDefaultBaseId };
+	can::Encoder command_encoder_{ can::kDefaultBaseId };
+	std::atomic<bool> stop_{ false };
+	std::atomic<bool> finished_{ false };
+	std::thread thread_;
+	int exit_status_ = -1;
+	std::vector<Report> reports_;
+	std::vector<can::HeartbeatData> heartbeats_;
+	int rejected_ = 0;
+};
+
+/* The vision-core accuracy bar: rotation within 2 deg, translation within max(5 mm, 2 % of range). */
+void expectAccurate(const can::PoseData &pose, const Pose &truth, int *checked)
+{
+	const Eigen::Vector3d t(pose.t_mm[0], pose.t_mm[1], pose.t_mm[2]);
+	const double range_mm = truth.t_mm.norm();
+	const double trans_err_mm = (t - truth.t_mm).norm();
+	EXPECT_LE(trans_err_mm, std::max(5.0, 0.02 * range_mm)) << "frame " << pose.frame_counter << " t " << t.transpose()
+							       << " truth " << truth.t_mm.transpose();
+	const Eigen::Quaterniond q(pose.q[0], pose.q[1], pose.q[2], pose.q[3]);
+	const Eigen::Quaterniond qt(truth.R);
+	const double rot_err_deg = q.normalized().angularDistance(qt) * 180.0 / M_PI;
+	EXPECT_LE(rot_err_deg, 2.0) << "frame " << pose.frame_counter;
+	++*checked;
+}
+
+TEST(Daemon, SimBoardAt60HzGivesAccuratePosesForNearlyEveryFrame)
+{
+	BoardConfig config = simConfig();
+	Rig rig(config);
+	rig.start(4.0);
+	/* The controller reads the bus while the sensor runs (its receive queue is bounded). */
+	ASSERT_TRUE(rig.waitFor([&] { return rig.finished_.load(); }, 30s));
+	rig.stop();
+	EXPECT_EQ(rig.exit_status_, 0);
+
+	const DaemonStats &stats = rig.daemon_->stats();
+	ASSERT_GT(stats.frames, 120u) << "the camera delivered too few frames in 4 s";
+	/* Every frame the daemon got was lit (constant strobe) except at most the first,
+	 * whose exposure may straddle the LED switching on. */
+	EXPECT_LE(stats.frames_mixed + stats.frames_unlit, 1u);
+
+	int valid = 0, checked = 0;
+	for (const auto &r : rig.reports_) {
+		if (!r.pose_valid)
+			continue;
+		++valid;
+		expectAccurate(r.pose, rig.camera_->truthAt(r.pose.frame_counter), &checked);
+	}
+	const std::size_t reports = rig.reports_.size();
+	/* The final report is the shutdown status. */
+	ASSERT_GE(reports, stats.reports);
+	EXPECT_GE(static_cast<double>(valid), 0.99 * static_cast<double>(stats.frames))
+		<< valid << " valid poses for " << stats.frames << " frames";
+	EXPECT_EQ(rig.reports_.back().status.state, can::SensorState::Shutdown);
+	EXPECT_FALSE(rig.strobe_->isOn()) << "the LED must be off after shutdown";
+	EXPECT_EQ(rig.rejected_, 0);
+	EXPECT_GT(rig.heartbeats_.size(), 20u);
+	EXPECT_GT(stats.latency.count(), 0u);
+}
+
+TEST(Daemon, CommandFramesChangeModeStrobeAndEnable)
+{
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	Rig rig(config);
+	rig.start();
+	ASSERT_TRUE(rig.waitFor([&] {
+		return !rig.reports_.empty() && rig.reports_.back().status.state == can::SensorState::Tracking;
+	}, 10s)) << "never tracked";
+
+	can::CommandData alternate;
+	alternate.strobe = can::StrobeMode::Alternate;
+	alternate.mode = can::TrackMode::SearchOnly;
+	rig.sendCommand(alternate);
+	/* In alternate mode poses come from lit-minus-unlit frames: wait for valid poses there. */
+	ASSERT_TRUE(rig.waitFor([&] {
+		int n = 0;
+		for (const auto &r : rig.reports_)
+			n += r.status.strobe == can::StrobeMode::Alternate && r.pose_valid;
+		return n >= 10;
+	}, 10s)) << "no valid poses in alternate mode";
+	EXPECT_GT(rig.daemon_->stats().frames_unlit, 5u);
+	ASSERT_TRUE(rig.waitFor([&] {
+		return !rig.heartbeats_.empty() && rig.heartbeats_.back().mode == can::TrackMode::SearchOnly &&
+		       rig.heartbeats_.back().strobe == can::StrobeMode::Alternate;
+	}, 3s));
+	/* Alternate: the strobe switched many times, in pulses. */
+	EXPECT_GT(rig.strobe_->events().size(), 10u);
+
+	can::CommandData disable;
+	disable.enable = false;
+	rig.sendCommand(disable);
+	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && !rig.reports_.back().status.enabled; }, 3s));
+	std::this_thread::sleep_for(200ms);
+	rig.drain();
+	EXPECT_FALSE(rig.reports_.back().pose_valid);
+	EXPECT_FALSE(rig.strobe_->isOn()) << "disabled: LED off";
+
+	/* A command with a bad CRC is rejected and reported. */
+	can::RawFrame bad = rig.command_encoder_.encodeCommand(can::CommandData{});
+	bad.data[0] ^= 0x01;
+	hal::CanFrame f;
+	f.id = bad.id;
+	f.len = 8;
+	for (int i = 0; i < 8; ++i)
+		f.data[static_cast<std::size_t>(i)] = bad.data[static_cast<std::size_t>(i)];
+	rig.controller_->send(f);
+	rig.controller_->poll();
+	ASSERT_TRUE(rig.waitFor([&] {
+		return !rig.reports_.empty() && (rig.reports_.back().status.faults & can::fault::kCommandRejected);
+	}, 3s));
+	EXPECT_FALSE(rig.daemon_->enabled()) << "a rejected command must change nothing";
+
+	can::CommandData enable;
+	rig.sendCommand(enable);
+	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+	rig.stop();
+	EXPECT_GE(rig.daemon_->stats().commands, 3u);
+	EXPECT_GE(rig.daemon_->stats().commands_rejected, 1u);
+}
+
+TEST(Daemon, CameraStallReportsFaultAndSwitchesTheLedOff)
+{
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	config.camera.stall_timeout_ms = 200;
+	Rig rig(config);
+	rig.start();
+	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+	EXPECT_TRUE(rig.strobe_->isOn());
+
+	rig.camera_->setStall(true);
+	ASSERT_TRUE(rig.waitFor([&] {
+		return !rig.reports_.empty() && rig.reports_.back().status.state == can::SensorState::Fault &&
+		       (rig.reports_.back().status.faults & can::fault::kCameraStall);
+	}, 5s)) << "no fault status during the stall";
+	EXPECT_FALSE(rig.reports_.back().pose_valid);
+	EXPECT_FALSE(rig.strobe_->isOn()) << "the LED must go off while the camera stalls";
+	/* Status keeps coming during the stall. */
+	const std::size_t during = rig.reports_.size();
+	std::this_thread::sleep_for(500ms);
+	rig.drain();
+	EXPECT_GT(rig.reports_.size(), during);
+
+	rig.camera_->setStall(false);
+	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s))
+		<< "no recovery after the stall";
+	EXPECT_TRUE(rig.strobe_->isOn());
+	rig.stop();
+	EXPECT_GE(rig.daemon_->stats().stalls, 1u);
+}
+
+TEST(Daemon, FullCanQueueDropsAndCountsWhileTheLoopKeepsRate)
+{
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	config.can.tx_queue_depth = 8;
+	Rig rig(config);
+	rig.start();
+	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+
+	const std::uint64_t frames_before = rig.daemon_->stats().frames;
+	const Pose before_pose = rig.camera_->truthAt(0);
+	(void)before_pose;
+	rig.hub_->setBlocked(true);
+	std::this_thread::sleep_for(1s);
+	const std::uint64_t frames_blocked = rig.daemon_->stats().frames - frames_before;
+	rig.hub_->setBlocked(false);
+	/* The loop went on at the camera's rate: frames kept being processed while nothing left. */
+	EXPECT_GT(frames_blocked, 30u) << "the frame loop stalled behind a full CAN queue";
+	ASSERT_TRUE(rig.waitFor([&] {
+		return !rig.reports_.empty() && (rig.reports_.back().status.faults & can::fault::kCanTxOverflow);
+	}, 3s)) << "the overflow was not reported";
+	rig.stop();
+	EXPECT_GT(rig.daemon_->stats().can_send_drops, 0u);
+}
+
+} /* namespace */
+} /* namespace dockpose::firmware */

@@ -1,0 +1,180 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * dockposed as outside tools run it: `dockposed --board PATH [--for S] [--can-log FILE]`.
+ * The CAN log it writes is decoded by scripts/candecode (python-can + canmatrix
+ * through the DBC), an independent reader.
+ */
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+namespace {
+
+#ifdef DOCKPOSE_TOOL_EMULATOR
+const std::string kEmulator = std::string(DOCKPOSE_TOOL_EMULATOR) + " ";
+#else
+const std::string kEmulator;
+#endif
+const std::string kSource = DOCKPOSE_SOURCE_DIR;
+const std::string kSimBoard = kSource + "/board/sim/board.json";
+
+struct RunResult {
+	int status = -1;
+	std::string err;
+};
+
+class Dockposed : public ::testing::Test
+{
+protected:
+	void SetUp() override
+	{
+		char dir_template[] = "/tmp/dockposed-test.XXXXXX";
+		ASSERT_NE(mkdtemp(dir_template), nullptr);
+		dir_ = dir_template;
+	}
+	void TearDown() override { std::system(("rm -rf '" + dir_ + "'").c_str()); }
+
+	/* Runs a shell command line with dockposed's stderr captured; returns its exit status. */
+	RunResult run(const std::string &args, const std::string &prefix = "")
+	{
+		const std::string err = dir_ + "/stderr.txt";
+		const std::string cmd = prefix + kEmulator + DOCKPOSED + std::string(" ") + args + " 2>'" + err + "'";
+		RunResult r;
+		const int raw = std::system(cmd.c_str());
+		r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : 128 + WTERMSIG(raw);
+		r.err = slurp(err);
+		return r;
+	}
+
+	std::string writeFile(const std::string &name, const std::string &text)
+	{
+		const std::string path = dir_ + "/" + name;
+		std::ofstream(path) << text;
+		return path;
+	}
+
+	static std::string slurp(const std::string &path)
+	{
+		std::ifstream in(path);
+		std::stringstream ss;
+		ss << in.rdbuf();
+		return ss.str();
+	}
+
+	/* scripts/candecode --json over a candump log: one JSON object per report. */
+	std::vector<nlohmann::json> decode(const std::string &log)
+	{
+		const std::string out = dir_ + "/decoded.jsonl";
+		const std::string cmd = std::string(DOCKPOSE_PYTHON) + " " + kSource + "/scripts/candecode --json --log '" +
+					log + "' >'" + out + "' 2>'" + dir_ + "/candecode.err'";
+		EXPECT_EQ(std::system(cmd.c_str()), 0) << slurp(dir_ + "/candecode.err");
+		std::vector<nlohmann::json> reports;
+		std::ifstream in(out);
+		for (std::string line; std::getline(in, line);)
+			if (!line.empty())
+				reports.push_back(nlohmann::json::parse(line));
+		return reports;
+	}
+
+	std::string dir_;
+};
+
+TEST_F(Dockposed, RunsTheSimBoardAndItsCanLogDecodesWithTheDbc)
+{
+	const std::string log = dir_ + "/can.log";
+	const RunResult r = run("--board " + kSimBoard + " --for 3 --can-log '" + log + "'");
+	ASSERT_EQ(r.status, 0) << r.err;
+	EXPECT_NE(r.err.find("-> TRACKING"), std::string::npos) << r.err;
+	EXPECT_NE(r.err.find("valid poses"), std::string::npos) << r.err;
+
+	const auto reports = decode(log);
+	ASSERT_GT(reports.size(), 60u) << "3 s at 60 frames/s";
+	int valid = 0;
+	for (const auto &rep : reports)
+		valid += rep.at("valid").get<bool>();
+	EXPECT_GE(valid, static_cast<int>(0.9 * static_cast<double>(reports.size())));
+	EXPECT_EQ(reports.back().at("state").get<std::string>(), "SHUTDOWN");
+	/* The approach comes closer: the first valid pose is farther than the last. */
+	double first_z = 0, last_z = 0;
+	for (const auto &rep : reports)
+		if (rep.at("valid").get<bool>()) {
+			if (first_z == 0)
+				first_z = rep.at("t_mm")[2].get<double>();
+			last_z = rep.at("t_mm")[2].get<double>();
+		}
+	EXPECT_GT(first_z, last_z + 100.0);
+}
+
+TEST_F(Dockposed, SigtermShutsDownCleanlyWithALastStatusFrame)
+{
+	const std::string log = dir_ + "/can.log";
+	const RunResult r = run("--board " + kSimBoard + " --can-log '" + log + "'", "timeout --preserve-status -s TERM 2 ");
+	ASSERT_EQ(r.status, 0) << r.err;
+	const auto reports = decode(log);
+	ASSERT_FALSE(reports.empty());
+	EXPECT_EQ(reports.back().at("state").get<std::string>(), "SHUTDOWN");
+}
+
+TEST_F(Dockposed, BadBoardFilesAreRefusedWithTheirErrors)
+{
+	const std::string bad = writeFile("bad.json", "{ \"board\": \"sim\", \"camera\": { \"exposure_us\": 0 } }");
+	RunResult r = run("--board '" + bad + "' --for 1");
+	EXPECT_EQ(r.status, 2);
+	EXPECT_NE(r.err.find("camera.exposure_us"), std::string::npos) << r.err;
+
+	r = run("--board '" + dir_ + "/missing.json' --for 1");
+	EXPECT_EQ(r.status, 2);
+	EXPECT_NE(r.err.find("missing.json"), std::string::npos) << r.err;
+
+	r = run("--for 1");
+	EXPECT_EQ(r.status, 2);
+	EXPECT_NE(r.err.find("--board"), std::string::npos) << r.err;
+}
+
+TEST_F(Dockposed, BoardsAndBackendsMustBeBuiltIn)
+{
+	std::string sim = slurp(kSimBoard);
+	const auto with = [&](const std::string &from, const std::string &to) {
+		std::string text = sim;
+		const auto at = text.find(from);
+		EXPECT_NE(at, std::string::npos) << from;
+		if (at != std::string::npos)
+			text.replace(at, from.size(), to);
+		return text;
+	};
+	/* Copy the sim board's neighbours so relative paths still resolve. */
+	std::system(("cp " + kSource + "/board/sim/*.json '" + dir_ + "/'").c_str());
+
+	RunResult r = run("--board '" + writeFile("other.json", with("\"board\": \"sim\"", "\"board\": \"toaster\"")) + "'");
+	EXPECT_EQ(r.status, 2);
+	EXPECT_NE(r.err.find("board \"toaster\" is not built into this dockposed (built: sim"), std::string::npos)
+		<< r.err;
+
+	r = run("--board '" + writeFile("cam.json5", with("\"synthetic\"", "\"libcamera\"")) + "'");
+	EXPECT_EQ(r.status, 2);
+	EXPECT_NE(r.err.find("board sim has no \"libcamera\" backend"), std::string::npos) << r.err;
+}
+
+TEST_F(Dockposed, TheReferenceBoardFailsCleanlyWithoutItsHardware)
+{
+	/* This machine has no GPIO, camera or CAN: dockposed must say which device is missing
+	 * and exit, not hang or crash. */
+	const std::string board = kSource + "/board/rpi5-imx296/board.json";
+	RunResult r = run("--board " + board + " --for 1 --can-log x.log");
+	EXPECT_EQ(r.status, 2);
+	EXPECT_NE(r.err.find("--can-log only applies"), std::string::npos) << r.err;
+
+	r = run("--board " + board + " --for 1");
+	EXPECT_EQ(r.status, 1) << r.err;
+	EXPECT_NE(r.err.find("cannot start: strobe: gpio"), std::string::npos) << r.err;
+}
+
+} /* namespace */
