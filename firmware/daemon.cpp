@@ -249,7 +249,7 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 		return;
 	}
 
-	if (strobe_mode_ == StrobeMode::Alternate)
+	if (strobe_mode_ == StrobeMode::Alternate && enabled_)
 		scheduleAlternatePulses(frame);
 
 	const std::int64_t exposure_end_ns = frame.timestamp_ns + static_cast<std::int64_t>(frame.exposure_us) * 1000;

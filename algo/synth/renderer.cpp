@@ -19,7 +19,7 @@
  *
  * Brightness: the peak of the continuous spot above background is
  * led_peak (reference_range_mm / range)^2 cos(view angle), floored at
- * min_led_peak; the frame saturates at 255.
+ * min_led_peak, times led_gain; the frame saturates at 255.
  *
  * Frame assembly is tiled (64 x 64 pixels): per tile, every spot and glint
  * touching the tile is accumulated into a stack buffer of doubles, the
@@ -344,11 +344,13 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 	const int n_leds = static_cast<int>(target_.points_mm.size());
 	const Eigen::Vector3d centroid = centroidOf(target_);
 
-	Rng rng_gradient(splitmix64(seed ^ 0x67726164ULL));
+	/* The scene (gradient and clutter) may have its own seed; noise and occlusion are per frame. */
+	const std::uint64_t scene_seed = options.clutter_seed != 0 ? options.clutter_seed : seed;
+	Rng rng_gradient(splitmix64(scene_seed ^ 0x67726164ULL));
 	Rng rng_occlusion(splitmix64(seed ^ 0x6f63636cULL));
-	Rng rng_reflections(splitmix64(seed ^ 0x7265666cULL));
-	Rng rng_glints(splitmix64(seed ^ 0x676c6e74ULL));
-	Rng rng_hot(splitmix64(seed ^ 0x686f7470ULL));
+	Rng rng_reflections(splitmix64(scene_seed ^ 0x7265666cULL));
+	Rng rng_glints(splitmix64(scene_seed ^ 0x676c6e74ULL));
+	Rng rng_hot(splitmix64(scene_seed ^ 0x686f7470ULL));
 	const std::uint64_t noise_key = splitmix64(seed ^ 0x6e6f6973ULL);
 
 	/* Where every LED lands, and which ones shine towards the camera. */
@@ -429,8 +431,9 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 		E.col(1) = e2;
 		const Eigen::Matrix2d A = options.led_radius_mm * (J * E);
 		const double ratio = options.reference_range_mm / range;
-		const double peak =
-			std::max(options.min_led_peak, options.led_peak * ratio * ratio * cos_view);
+		const double peak = std::max(options.min_led_peak,
+					     options.led_peak * ratio * ratio * cos_view) *
+				    options.led_gain;
 		spot_led[spots.size()] = i;
 		spots.push_back(makeSpot(uv, A * A.transpose(), peak, sigma));
 	}

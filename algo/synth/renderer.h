@@ -52,6 +52,20 @@ struct RenderOptions {
 	int occluded_leds = 0;
 	/* ... or exactly these (bit i hides LED i); applied in addition. */
 	std::uint32_t occlusion_mask = 0;
+
+	/*
+	 * Scene and lighting, for the simulated camera. clutter_seed seeds the
+	 * scene (background gradient, reflections, glints, hot pixels); 0: the
+	 * frame's seed. With a fixed clutter_seed, frames of different seeds
+	 * share their clutter (ambient light sources stay put) while the read
+	 * noise and random occlusion follow the frame's seed. Clutter keeps
+	 * clear of the LEDs, so it only moves where the target moves onto it (and
+	 * a reflection's size follows the target's range). led_gain scales the
+	 * LED spots alone (0: LEDs dark, 0.5: a half-lit exposure): the clutter's
+	 * places and brightness do not depend on it, unlike occlusion.
+	 */
+	std::uint64_t clutter_seed = 0;
+	double led_gain = 1.0;
 };
 
 struct RenderTruth {
