@@ -11,91 +11,20 @@
 #error "test_no_alloc must be compiled with EIGEN_RUNTIME_NO_MALLOC"
 #endif
 
-/* The replacement operator delete frees what the replacement operator new took from malloc. */
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-
-#include <atomic>
 #include <cstdio>
 #include <cstdlib>
-#include <new>
 #include <vector>
-
-#include <dlfcn.h>
 
 #include <gtest/gtest.h>
 
 #include "algo/pipeline.h"
 #include "algo/synth/renderer.h"
+#include "../common/counting_allocator.h"
 #include "fixtures.h"
 
-namespace {
-
-std::atomic<long> g_allocations{ 0 };
-std::atomic<bool> g_armed{ false };
-
-void count()
-{
-	if (g_armed.load(std::memory_order_relaxed))
-		g_allocations.fetch_add(1, std::memory_order_relaxed);
-}
-
-} /* namespace */
-
-extern "C" void *__libc_malloc(std::size_t);
-
-/* Counting hooks: operator new and friends take memory from the C library directly. */
-void *operator new(std::size_t n)
-{
-	count();
-	if (void *p = __libc_malloc(n ? n : 1))
-		return p;
-	throw std::bad_alloc();
-}
-void *operator new[](std::size_t n)
-{
-	count();
-	if (void *p = __libc_malloc(n ? n : 1))
-		return p;
-	throw std::bad_alloc();
-}
-void *operator new(std::size_t n, std::align_val_t a)
-{
-	count();
-	if (void *p = std::aligned_alloc(static_cast<std::size_t>(a), (n + static_cast<std::size_t>(a) - 1) &
-									      ~(static_cast<std::size_t>(a) - 1)))
-		return p;
-	throw std::bad_alloc();
-}
-void operator delete(void *p) noexcept { std::free(p); }
-void operator delete[](void *p) noexcept { std::free(p); }
-void operator delete(void *p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void *p, std::size_t) noexcept { std::free(p); }
-void operator delete(void *p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void *p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-
-/* malloc family: interpose and forward to the C library's implementation. */
-extern "C" {
-extern void *__libc_calloc(std::size_t, std::size_t);
-extern void *__libc_realloc(void *, std::size_t);
-
-void *malloc(std::size_t n)
-{
-	count();
-	return __libc_malloc(n);
-}
-void *calloc(std::size_t n, std::size_t m)
-{
-	count();
-	return __libc_calloc(n, m);
-}
-void *realloc(void *p, std::size_t n)
-{
-	count();
-	return __libc_realloc(p, n);
-}
-}
-
 using namespace dockpose;
+using dockpose::test::g_allocations;
+using dockpose::test::g_armed;
 
 namespace {
 

@@ -1,0 +1,101 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The firmware's frame loop allocates nothing in steady state: the daemon on
+ * the simulated board (synthetic camera thread, strobe controller thread,
+ * loopback CAN) runs for a while, then every operator new / malloc in the
+ * whole process is counted over a window of about a second of frames.
+ */
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <memory>
+#include <new>
+#include <thread>
+
+#include "algo/io/model_json.h"
+#include "../common/counting_allocator.h"
+#include "firmware/config.h"
+#include "firmware/daemon.h"
+#include "hal/sim/loopback_can_bus.h"
+#include "hal/sim/recording_strobe.h"
+#include "hal/sim/synthetic_camera.h"
+
+namespace dockpose::firmware {
+namespace {
+
+using namespace std::chrono_literals;
+
+TEST(DaemonNoAlloc, CountingHooksSeeEveryThread)
+{
+	test::armAllocationCounter();
+	std::thread t([] {
+		auto *p = new int(3);
+		void *q = std::malloc(16);
+		delete p;
+		std::free(q);
+	});
+	t.join();
+	/* Two in the thread (plus whatever starting it took). */
+	EXPECT_GE(test::disarmAllocationCounter(), 2);
+}
+
+TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
+{
+	ConfigResult loaded = loadBoardConfig(std::string(DOCKPOSE_SOURCE_DIR) + "/board/sim/board.json");
+	ASSERT_TRUE(loaded.ok());
+	BoardConfig config = loaded.config;
+	config.systemd.notify = false;
+	config.camera.synthetic.loop = true;
+
+	auto hub = std::make_shared<hal::LoopbackHub>();
+	board::Backends b;
+	auto strobe = std::make_unique<hal::RecordingStrobe>();
+	b.strobe_control = std::make_unique<hal::StrobeController>(strobe.get(), config.camera.stall_timeout_ms);
+	b.strobe = std::move(strobe);
+	auto target = loadTargetModel(config.pipeline.target);
+	auto intrinsics = loadCameraIntrinsics(config.camera.intrinsics);
+	ASSERT_TRUE(target.ok() && intrinsics.ok());
+	hal::SyntheticScene scene{};
+	for (int i = 0; i < 6; ++i) {
+		scene.from[i] = config.camera.synthetic.from[i];
+		scene.to[i] = config.camera.synthetic.to[i];
+	}
+	scene.duration_s = config.camera.synthetic.duration_s;
+	scene.loop = true;
+	scene.reflections = config.camera.synthetic.reflections;
+	scene.glints = config.camera.synthetic.glints;
+	scene.hot_pixels = config.camera.synthetic.hot_pixels;
+	scene.noise_sigma = config.camera.synthetic.noise_sigma;
+	scene.seed = config.camera.synthetic.seed;
+	b.camera = std::make_unique<hal::SyntheticCamera>(target.value, intrinsics.value, scene, b.strobe_control.get());
+	b.can = std::make_unique<hal::LoopbackCanBus>(hub, "sensor");
+
+	std::FILE *log = std::tmpfile();
+	Daemon daemon(config, std::move(b), log);
+	ASSERT_TRUE(daemon.start().isOk());
+	std::atomic<bool> stop{ false };
+	std::thread loop([&] { daemon.run(stop); });
+
+	/* Warm up: tracking, heartbeats, the loopback hub's traffic ring filling. */
+	std::this_thread::sleep_for(1500ms);
+	const std::uint64_t frames_before = daemon.stats().frames;
+	const std::uint64_t poses_before = daemon.stats().poses_valid;
+	test::armAllocationCounter();
+	std::this_thread::sleep_for(1000ms);
+	const long allocations = test::disarmAllocationCounter();
+	const std::uint64_t frames = daemon.stats().frames - frames_before;
+	const std::uint64_t poses = daemon.stats().poses_valid - poses_before;
+
+	stop = true;
+	loop.join();
+	std::fclose(log);
+
+	ASSERT_GT(frames, 20u) << "the loop did not run";
+	EXPECT_GT(poses, frames / 2) << "steady state means tracking";
+	EXPECT_EQ(allocations, 0) << allocations << " allocations over " << frames << " frames";
+}
+
+} /* namespace */
+} /* namespace dockpose::firmware */
