@@ -10,6 +10,7 @@
 
 #include "algo/io/model_json.h"
 #include "board/board.h"
+#include "board/sim/sim_board.h"
 #include "hal/sim/file_can_bus.h"
 #include "hal/sim/recording_strobe.h"
 #include "hal/sim/replay_camera.h"
@@ -36,19 +37,7 @@ hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 		auto intrinsics = loadCameraIntrinsics(config.camera.intrinsics);
 		if (!intrinsics.ok())
 			return hal::Status::error(intrinsics.error);
-		const firmware::SyntheticCameraConfig &s = config.camera.synthetic;
-		hal::SyntheticScene scene{};
-		for (int i = 0; i < 6; ++i) {
-			scene.from[i] = s.from[i];
-			scene.to[i] = s.to[i];
-		}
-		scene.duration_s = s.duration_s;
-		scene.loop = s.loop;
-		scene.reflections = s.reflections;
-		scene.glints = s.glints;
-		scene.hot_pixels = s.hot_pixels;
-		scene.noise_sigma = s.noise_sigma;
-		scene.seed = s.seed;
+		const hal::SyntheticScene scene = syntheticScene(config.camera.synthetic);
 		out->camera = std::make_unique<hal::SyntheticCamera>(target.value, intrinsics.value, scene,
 								     out->strobe_control.get());
 	} else {
@@ -63,6 +52,23 @@ hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 }
 
 } /* namespace */
+
+hal::SyntheticScene syntheticScene(const firmware::SyntheticCameraConfig &s)
+{
+	hal::SyntheticScene scene{};
+	for (int i = 0; i < 6; ++i) {
+		scene.from[i] = s.from[i];
+		scene.to[i] = s.to[i];
+	}
+	scene.duration_s = s.duration_s;
+	scene.loop = s.loop;
+	scene.reflections = s.reflections;
+	scene.glints = s.glints;
+	scene.hot_pixels = s.hot_pixels;
+	scene.noise_sigma = s.noise_sigma;
+	scene.seed = s.seed;
+	return scene;
+}
 
 extern const BoardInfo kSimBoard;
 const BoardInfo kSimBoard{ "sim", "host simulation: synthetic or replayed frames, recording strobe, candump-log CAN",

@@ -21,6 +21,7 @@
 #include <Eigen/Geometry>
 
 #include "algo/io/model_json.h"
+#include "board/sim/sim_board.h"
 #include "firmware/config.h"
 #include "firmware/daemon.h"
 #include "firmware/protocol/dockpose_can.h"
@@ -62,19 +63,7 @@ public:
 		auto target = loadTargetModel(config.pipeline.target);
 		auto intrinsics = loadCameraIntrinsics(config.camera.intrinsics);
 		EXPECT_TRUE(target.ok() && intrinsics.ok());
-		const SyntheticCameraConfig &s = config.camera.synthetic;
-		hal::SyntheticScene scene{};
-		for (int i = 0; i < 6; ++i) {
-			scene.from[i] = s.from[i];
-			scene.to[i] = s.to[i];
-		}
-		scene.duration_s = s.duration_s;
-		scene.loop = s.loop;
-		scene.reflections = s.reflections;
-		scene.glints = s.glints;
-		scene.hot_pixels = s.hot_pixels;
-		scene.noise_sigma = s.noise_sigma;
-		scene.seed = s.seed;
+		const hal::SyntheticScene scene = board::syntheticScene(config.camera.synthetic);
 		auto camera = std::make_unique<hal::SyntheticCamera>(target.value, intrinsics.value, scene,
 								     b.strobe_control.get());
 		camera_ = camera.get();

@@ -16,6 +16,7 @@
 
 #include "algo/io/model_json.h"
 #include "../common/counting_allocator.h"
+#include "board/sim/sim_board.h"
 #include "firmware/config.h"
 #include "firmware/daemon.h"
 #include "hal/sim/loopback_can_bus.h"
@@ -57,18 +58,7 @@ TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
 	auto target = loadTargetModel(config.pipeline.target);
 	auto intrinsics = loadCameraIntrinsics(config.camera.intrinsics);
 	ASSERT_TRUE(target.ok() && intrinsics.ok());
-	hal::SyntheticScene scene{};
-	for (int i = 0; i < 6; ++i) {
-		scene.from[i] = config.camera.synthetic.from[i];
-		scene.to[i] = config.camera.synthetic.to[i];
-	}
-	scene.duration_s = config.camera.synthetic.duration_s;
-	scene.loop = true;
-	scene.reflections = config.camera.synthetic.reflections;
-	scene.glints = config.camera.synthetic.glints;
-	scene.hot_pixels = config.camera.synthetic.hot_pixels;
-	scene.noise_sigma = config.camera.synthetic.noise_sigma;
-	scene.seed = config.camera.synthetic.seed;
+	const hal::SyntheticScene scene = board::syntheticScene(config.camera.synthetic);
 	b.camera = std::make_unique<hal::SyntheticCamera>(target.value, intrinsics.value, scene, b.strobe_control.get());
 	b.can = std::make_unique<hal::LoopbackCanBus>(hub, "sensor");
 
