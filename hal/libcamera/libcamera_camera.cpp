@@ -655,14 +655,22 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 			slot.intensity.assign(static_cast<std::size_t>(width_) * static_cast<std::size_t>(height_), 0);
 	}
 
+	/*
+	 * find(), not count(): ControlInfoMap::count(id) only asks the id map, and
+	 * pipelines such as vimc build their map over libcamera's global id map
+	 * (controls::controls), so count() says 1 for every control libcamera knows.
+	 */
 	const lc::ControlInfoMap &controls = camera_->controls();
-	has_ae_enable_ = controls.count(lc::controls::AeEnable.id()) > 0;
-	has_exposure_ = controls.count(lc::controls::ExposureTime.id()) > 0;
-	has_gain_ = controls.count(lc::controls::AnalogueGain.id()) > 0;
-	has_frame_duration_ = controls.count(lc::controls::FrameDurationLimits.id()) > 0;
+	const auto lists = [&controls](const lc::ControlId &control) {
+		return controls.find(control.id()) != controls.end();
+	};
+	has_ae_enable_ = lists(lc::controls::AeEnable);
+	has_exposure_ = lists(lc::controls::ExposureTime);
+	has_gain_ = lists(lc::controls::AnalogueGain);
+	has_frame_duration_ = lists(lc::controls::FrameDurationLimits);
 #if DOCKPOSE_LIBCAMERA_HAS_EXPOSURE_MODES
-	has_exposure_mode_ = controls.count(lc::controls::ExposureTimeMode.id()) > 0;
-	has_gain_mode_ = controls.count(lc::controls::AnalogueGainMode.id()) > 0;
+	has_exposure_mode_ = lists(lc::controls::ExposureTimeMode);
+	has_gain_mode_ = lists(lc::controls::AnalogueGainMode);
 #endif
 
 	controls_packed_.store(packControls(config.exposure_us, static_cast<float>(config.analogue_gain)));

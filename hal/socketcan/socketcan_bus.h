@@ -43,8 +43,10 @@
  *    tx_enobufs counts one per refused write; the next send() or poll() tries
  *    again. Note vcan has no queue of its own (tx_queue_len 0, it delivers at
  *    once), so shrinking its txqueuelen alone gives no ENOBUFS; a slow qdisc
- *    with a small limit should (not tried yet: e.g. tc qdisc add dev vcan0
- *    root tbf rate 10kbit burst 200 limit 200, with CONFIG_NET_SCH_TBF).
+ *    whose queue is txqueuelen long does (tests/vm/test_vm_socketcan.cpp:
+ *    ip link set vcan0 txqueuelen 4; tc qdisc add dev vcan0 root handle 1:
+ *    tbf rate 1kbit burst 32 latency 10s; tc qdisc add dev vcan0 parent 1:1
+ *    pfifo, with CONFIG_NET_SCH_TBF).
  *  - EINVAL / EMSGSIZE / EOVERFLOW on a write (the kernel refuses that frame):
  *    the frame is dropped, tx_errors counts it, the next one goes.
  *  - any other write error (ENETDOWN: interface set down; ENXIO / ENODEV: it
