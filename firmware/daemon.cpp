@@ -68,7 +68,7 @@ Daemon::Daemon(const BoardConfig &config, board::Backends backends, std::FILE *l
 	  encoder_(config.can.base_id), command_decoder_(config.can.base_id), notifier_(config.systemd.notify),
 	  strobe_mode_(config.strobe.mode), track_mode_(config.pipeline.mode), exposure_us_(config.camera.exposure_us),
 	  gain_(config.camera.analogue_gain),
-	  period_ns_(static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz))
+	  period_ns_(static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz)), measured_period_ns_(period_ns_)
 {
 	/* The configuration was validated (both files load); a failure here is a bug upstream,
 	 * reported by start(). */
@@ -249,6 +249,7 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 		return;
 	}
 
+	measurePeriod(frame);
 	if (strobe_mode_ == StrobeMode::Alternate && enabled_)
 		scheduleAlternatePulses(frame);
 
@@ -356,21 +357,57 @@ void Daemon::processView(const ImageView &view, const hal::Frame &frame)
 	stats_.latency.add(latency_ns);
 }
 
+void Daemon::measurePeriod(const hal::Frame &frame)
+{
+	if (frame.timestamp_ns <= 0)
+		return;
+	if (have_period_sample_ && frame.sequence > period_sequence_ && frame.timestamp_ns > period_timestamp_ns_) {
+		const std::int64_t interval_ns = (frame.timestamp_ns - period_timestamp_ns_) /
+						 static_cast<std::int64_t>(frame.sequence - period_sequence_);
+		/* Intervals across a stall say nothing about the frame grid. */
+		if (interval_ns < static_cast<std::int64_t>(config_.camera.stall_timeout_ms) * kNsPerMs) {
+			if (!have_period_measured_)
+				measured_period_ns_ = interval_ns;
+			else
+				measured_period_ns_ += (interval_ns - measured_period_ns_) / 8;
+			have_period_measured_ = true;
+		}
+	}
+	have_period_sample_ = true;
+	period_sequence_ = frame.sequence;
+	period_timestamp_ns_ = frame.timestamp_ns;
+}
+
 void Daemon::scheduleAlternatePulses(const hal::Frame &frame)
 {
 	if (frame.timestamp_ns <= 0)
 		return;
 	/* Light every even frame: aim a pulse at the predicted exposure of the next even frames
-	 * that are not yet scheduled. The exposure grid comes from the sensor's own timestamps. */
+	 * that are not yet scheduled. The exposure grid comes from the sensor's own timestamps: this
+	 * frame's start of exposure and the period measured between frames. */
 	const std::int64_t margin_ns = static_cast<std::int64_t>(config_.strobe.pulse_margin_us) * 1000;
 	const std::int64_t exposure_ns = static_cast<std::int64_t>(frame.exposure_us) * 1000;
-	for (std::uint64_t k = 1; k <= 3; ++k) {
+	/* Frames may reach us several periods after their exposure (a slow pipeline, an emulated
+	 * machine): look as far ahead as it takes to find exposures that have not begun, and keep
+	 * two pulses scheduled. */
+	const std::int64_t lead_ns = hal::monotonicNs() + 200000;
+	int scheduled = 0;
+	for (std::uint64_t k = 1; k <= 64 && scheduled < 2; ++k) {
 		const std::uint64_t target = frame.sequence + k;
-		if (target % 2 != 0 || (last_scheduled_sequence_ && target <= last_scheduled_sequence_))
+		if (target % 2 != 0)
 			continue;
-		const std::int64_t start_ns = frame.timestamp_ns + static_cast<std::int64_t>(k) * period_ns_ - margin_ns;
-		if (backends_.strobe_control->schedulePulse(start_ns, exposure_ns + 2 * margin_ns))
-			last_scheduled_sequence_ = target;
+		const std::int64_t start_ns =
+			frame.timestamp_ns + static_cast<std::int64_t>(k) * measured_period_ns_ - margin_ns;
+		if (start_ns < lead_ns)
+			continue;
+		if (last_scheduled_sequence_ && target <= last_scheduled_sequence_) {
+			++scheduled;
+			continue;
+		}
+		if (!backends_.strobe_control->schedulePulse(start_ns, exposure_ns + 2 * margin_ns))
+			break;
+		last_scheduled_sequence_ = target;
+		++scheduled;
 	}
 }
 

@@ -97,6 +97,7 @@ public:
 private:
 	void handleFrame(const hal::Frame &frame, std::int64_t now_ns);
 	void processView(const ImageView &view, const hal::Frame &frame);
+	void measurePeriod(const hal::Frame &frame);
 	void scheduleAlternatePulses(const hal::Frame &frame);
 	void handleStall(std::int64_t now_ns);
 	void handleCommands();
@@ -132,7 +133,14 @@ private:
 	bool have_ambient_ = false;
 	Image difference_;
 	std::uint64_t last_scheduled_sequence_ = 0;
-	std::int64_t period_ns_;
+	std::int64_t period_ns_;	/* configured frame period */
+	/* The sensor's real frame period, from its timestamps (smoothed); pulses are aimed with it.
+	 * Starts at the configured period, which a camera that ignores frame_rate_hz does not keep. */
+	std::int64_t measured_period_ns_;
+	bool have_period_sample_ = false;
+	bool have_period_measured_ = false;
+	std::uint64_t period_sequence_ = 0;
+	std::int64_t period_timestamp_ns_ = 0;
 
 	/* Frame bookkeeping. */
 	bool have_sequence_ = false;

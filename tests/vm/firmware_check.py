@@ -1,0 +1,585 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: MIT
+"""Host half of the whole-firmware VM tests (tests/vm/firmware_vm.sh; docs/vm-tests.md).
+
+Builds the DP_Command frames the guest sends, writes the replay board, and checks what the
+guest recorded (tests/vm/firmware_guest.sh): the candump log decoded twice, with
+scripts/candecode (CRC, alive counters, reports) and with canmatrix alone
+(tests/firmware/canmatrix_decode.py), both from firmware/protocol/dockpose.dbc, the two
+decodings compared, and the gpio-sim samples.
+
+  firmware_check.py command [--enable 0|1] [--mode track|search_only]
+                            [--strobe off|constant|alternate|unchanged] --alive N [--bad-crc]
+      print a DP_Command frame for cansend (ID#HEX, base 0x300)
+  firmware_check.py replay-board --board B --camera C --target T --frames DIR --rate HZ -o OUT
+      write a replay variant of the vm board B
+  firmware_check.py board DIR
+      check a `firmware_guest.sh board` recording
+  firmware_check.py replay --truth TRUTH --frames N DIR_A DIR_B
+      check two `firmware_guest.sh replay` recordings of the same frames against each other
+      and against the render truth
+
+Prints "ok: ..." and "FAILED: ..." lines; exit 0 when every check passed, 1 otherwise, 2 on
+usage errors or when a decoder cannot run.
+"""
+
+import argparse
+import json
+import math
+import pathlib
+import re
+import subprocess
+import sys
+
+REPO = pathlib.Path(__file__).resolve().parent.parent.parent
+DBC = REPO / "firmware" / "protocol" / "dockpose.dbc"
+CANDECODE = REPO / "scripts" / "candecode"
+CANMATRIX_DECODE = REPO / "tests" / "firmware" / "canmatrix_decode.py"
+PYTHON = "/usr/bin/python3"
+
+BASE_ID = 0x300
+POSE_IDS = range(BASE_ID, BASE_ID + 5)
+STATUS_ID = BASE_ID + 5
+HEARTBEAT_ID = BASE_ID + 6
+COMMAND_ID = BASE_ID + 0x10
+DOCKPOSED_IDS = range(BASE_ID, BASE_ID + 7)
+POSE_MESSAGES = ["DP_Translation", "DP_QuatA", "DP_QuatB", "DP_Angles", "DP_Sigma"]
+# Pose signals compared between architectures, in raw steps (0.1 mm, 0.0001, 0.01 deg).
+POSE_SIGNALS = {
+	"DP_Translation": ["Tx", "Ty", "Tz"],
+	"DP_QuatA": ["Qw", "Qx", "Qy"],
+	"DP_QuatB": ["Qz"],
+	"DP_Angles": ["Roll", "Pan", "Tilt"],
+	"DP_Sigma": ["SigmaTx", "SigmaTy", "SigmaTz", "SigmaRoll", "SigmaPan", "SigmaTilt"],
+}
+STATES = ["STARTUP", "SEARCHING", "TRACKING", "DEGRADED", "FAULT", "SHUTDOWN"]
+STROBES = ["OFF", "CONSTANT", "ALTERNATE", "UNCHANGED"]
+MODES = ["TRACK", "SEARCH_ONLY"]
+FAULT_COMMAND_REJECTED = 0x80
+
+
+class Fatal(Exception):
+	"""Exit 2 with this message."""
+
+
+class Checks:
+	def __init__(self):
+		self.failures = 0
+
+	def ok(self, text):
+		print(f"ok: {text}")
+
+	def fail(self, text):
+		print(f"FAILED: {text}")
+		self.failures += 1
+
+	def check(self, cond, text, detail=""):
+		if cond:
+			self.ok(text)
+		else:
+			self.fail(text + (f": {detail}" if detail else ""))
+		return cond
+
+	def info(self, text):
+		print(f"   {text}")
+
+
+# --------------------------------------------------------------------------- frames
+
+
+def crc8_j1850(data):
+	"""CRC-8 SAE J1850 (poly 0x1d, init 0xff, xorout 0xff), as docs/can-protocol.md says."""
+	crc = 0xFF
+	for byte in data:
+		crc ^= byte
+		for _ in range(8):
+			crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+	return crc ^ 0xFF
+
+
+def command_frame(enable, mode, strobe, alive, bad_crc):
+	"""DP_Command bytes, packed from docs/can-protocol.md and checked against the DBC."""
+	data = bytearray(8)
+	data[0] = (enable & 1) | ((mode & 1) << 1) | ((strobe & 3) << 2)
+	data[6] = alive & 0x0F  # Sequence 0 in commands
+	data[7] = crc8_j1850(bytes([COMMAND_ID & 0xFF, (COMMAND_ID >> 8) & 0x07]) + bytes(data[:7]))
+	if bad_crc:
+		data[7] ^= 0xFF
+	# The same values through the DBC: a layout mistake here would send a command other than
+	# the one the test expects to see applied.
+	db = load_dbc()
+	import canmatrix
+	frame = db.frame_by_id(canmatrix.ArbitrationId(COMMAND_ID))
+	raw = {name: int(sig.raw_value) for name, sig in frame.decode(bytes(data)).items()}
+	want = {"Enable": enable, "Mode": mode, "StrobeMode": strobe, "ExposureUs": 0, "Gain": 0,
+			"AliveCounter": alive & 0x0F, "Sequence": 0}
+	for name, value in want.items():
+		if raw.get(name) != value:
+			raise Fatal(f"DP_Command packing disagrees with the DBC: {name} {raw.get(name)} != {value}")
+	return f"{COMMAND_ID:03X}#{data.hex().upper()}"
+
+
+def load_dbc():
+	import logging
+	logging.getLogger("canmatrix").setLevel(logging.ERROR)
+	try:
+		import canmatrix.formats
+	except ImportError as exc:
+		raise Fatal(f"python3-canmatrix is missing: {exc}")
+	db = canmatrix.formats.loadp_flat(str(DBC), import_type="dbc")
+	if db is None or not db.frames:
+		raise Fatal(f"{DBC}: no messages")
+	return db
+
+
+# --------------------------------------------------------------------------- logs
+
+
+LINE = re.compile(r"^\((\d+\.\d+)\)\s+(\S+)\s+([0-9A-Fa-f]{3,8})#([0-9A-Fa-f]*)$")
+SUMMARY_ERRORS = re.compile(r"errors: CRC (\d+), length (\d+), alive gaps (\d+) \(frames lost\), "
+							r"stale (\d+), malformed log lines (\d+)")
+
+
+def read_log(path):
+	"""[(timestamp, id, bytes)] of a candump -L log."""
+	frames = []
+	try:
+		text = path.read_text(encoding="ascii")
+	except OSError as exc:
+		raise Fatal(f"{path}: {exc.strerror}")
+	for lineno, line in enumerate(text.splitlines(), 1):
+		if not line.strip():
+			continue
+		m = LINE.match(line.strip())
+		if not m:
+			raise Fatal(f"{path}:{lineno}: not a candump -L line: {line!r}")
+		frames.append((float(m.group(1)), int(m.group(3), 16), bytes.fromhex(m.group(4))))
+	return frames
+
+
+def run(cmd):
+	proc = subprocess.run([str(c) for c in cmd], capture_output=True, text=True)
+	return proc.returncode, proc.stdout, proc.stderr
+
+
+def candecode(log):
+	"""candecode --json --heartbeats --strict: (status, objects, summary lines)."""
+	rc, out, err = run([PYTHON, CANDECODE, "--log", log, "--json", "--heartbeats", "--strict"])
+	if rc == 2:
+		raise Fatal(f"candecode {log}: {err.strip()}")
+	objects = [json.loads(line) for line in out.splitlines() if line.strip()]
+	return rc, objects, err.strip().splitlines()
+
+
+def summary_errors(lines):
+	for line in lines:
+		m = SUMMARY_ERRORS.search(line)
+		if m:
+			return dict(zip(["crc", "length", "alive_gaps", "stale", "malformed"], map(int, m.groups())))
+	raise Fatal("candecode printed no error summary: " + " / ".join(lines))
+
+
+def canmatrix_frames(log):
+	rc, out, err = run([PYTHON, CANMATRIX_DECODE, "--dbc", DBC, log])
+	if rc != 0:
+		raise Fatal(f"canmatrix_decode {log}: {err.strip()}")
+	return [json.loads(line) for line in out.splitlines() if line.strip()]
+
+
+class Recording:
+	"""One guest run: its files, and the log decoded both ways."""
+
+	def __init__(self, checks, folder, label):
+		self.c = checks
+		self.dir = pathlib.Path(folder)
+		self.label = label
+		self.all = read_log(self.dir / "can.log")
+		# dockposed's own frames: what the CRC/alive checks are about (the test injects a
+		# corrupt command on purpose; probe frames have id 0x7ff).
+		own = [f for f in self.all if f[1] in DOCKPOSED_IDS]
+		self.own_log = self.dir / "dockposed-frames.log"
+		with open(self.own_log, "w", encoding="ascii") as out:
+			for ts, can_id, data in own:
+				out.write(f"({ts:.6f}) vcan0 {can_id:03X}#{data.hex().upper()}\n")
+		self.commands = [(ts, data) for ts, can_id, data in self.all if can_id == COMMAND_ID]
+
+		self.rc, objects, self.summary = candecode(self.own_log)
+		self.reports = [o for o in objects if o.get("type") == "report"]
+		self.heartbeats = [o for o in objects if o.get("type") == "heartbeat"]
+		self.errors = summary_errors(self.summary)
+		self.frames = canmatrix_frames(self.own_log)
+		self.statuses = [f for f in self.frames if f["message"] == "DP_Status"]
+		self.beats = [f for f in self.frames if f["message"] == "DP_Heartbeat"]
+
+	def check_decoding(self):
+		c, n = self.c, self.label
+		c.check(len(self.all) > 0 and len(self.reports) > 0, f"{n}: candump recorded dockposed's frames",
+				f"{len(self.all)} frames, {len(self.reports)} reports")
+		undecoded = [f for f in self.frames if f["message"] is None]
+		c.check(not undecoded and len(self.frames) > 0,
+				f"{n}: canmatrix decodes all {len(self.frames)} dockposed frames with the DBC",
+				f"{len(undecoded)} with no DBC message, e.g. id 0x{undecoded[0]['id']:x}" if undecoded else "none")
+		e = self.errors
+		c.check(self.rc == 0 and not any(e.values()),
+				f"{n}: candecode --strict: CRC {e['crc']}, length {e['length']}, alive gaps {e['alive_gaps']}, "
+				f"stale {e['stale']}, malformed lines {e['malformed']}", " / ".join(self.summary))
+		# The two decoders agree frame by frame on what matters here.
+		same = (len(self.statuses) == len(self.reports) and len(self.beats) == len(self.heartbeats) and
+				all(STATES[s["raw"]["State"]] == r["state"] and STROBES[s["raw"]["StrobeMode"]] == r["strobe"] and
+					s["raw"]["FaultBits"] == r["fault_bits"] for s, r in zip(self.statuses, self.reports)) and
+				all(STATES[b["raw"]["State"]] == h["state"] and MODES[b["raw"]["Mode"]] == h["mode"] and
+					STROBES[b["raw"]["StrobeMode"]] == h["strobe"] and
+					abs(b["signals"]["FrameRate"] - h["frame_rate_hz"]) < 1e-9
+					for b, h in zip(self.beats, self.heartbeats)))
+		c.check(same, f"{n}: candecode and canmatrix agree: {len(self.reports)} status, "
+					  f"{len(self.heartbeats)} heartbeat frames",
+				f"canmatrix {len(self.statuses)} status / {len(self.beats)} heartbeat frames")
+		last = self.reports[-1] if self.reports else None
+		c.check(last is not None and last["state"] == "SHUTDOWN" and
+				all(r["state"] != "SHUTDOWN" for r in self.reports[:-1]),
+				f"{n}: the last status frame says SHUTDOWN (and only the last)",
+				last["state"] if last else "no status")
+		if last is not None:
+			later = [f for f in self.frames if f["timestamp"] > last["timestamp"]]
+			c.check(not later and last["strobe"] == "OFF",
+					f"{n}: nothing after the SHUTDOWN status; its strobe mode is OFF",
+					f"{len(later)} frames after it, strobe {last['strobe']}")
+
+	def dockposed_log(self):
+		try:
+			return (self.dir / "dockposed.err").read_text(errors="replace")
+		except OSError:
+			return ""
+
+	def dockposed_rc(self):
+		try:
+			return int((self.dir / "dockposed.rc").read_text().strip())
+		except (OSError, ValueError):
+			return None
+
+
+def gpio_samples(folder):
+	"""[(uptime, value)] and {mark: uptime} from gpio.txt."""
+	samples, marks = [], {}
+	try:
+		lines = (pathlib.Path(folder) / "gpio.txt").read_text(errors="replace").splitlines()
+	except OSError as exc:
+		raise Fatal(f"{folder}/gpio.txt: {exc.strerror}")
+	for line in lines:
+		parts = line.split()
+		try:
+			if len(parts) == 3 and parts[1] == "mark":
+				marks[parts[2]] = float(parts[0])
+			elif len(parts) == 2 and parts[1] in ("0", "1"):
+				samples.append((float(parts[0]), int(parts[1])))
+		except ValueError:
+			continue  # a line cut by the poller's end
+	return samples, marks
+
+
+def high_runs(samples):
+	"""[(start, end, count)] of consecutive high samples."""
+	runs, start, count, last = [], None, 0, None
+	for t, v in samples:
+		if v and start is None:
+			start, count = t, 0
+		if v:
+			count += 1
+			last = t
+		elif start is not None:
+			runs.append((start, last, count))
+			start = None
+	if start is not None:
+		runs.append((start, last, count))
+	return runs
+
+
+# --------------------------------------------------------------------------- board
+
+
+def check_board(folder):
+	c = Checks()
+	rec = Recording(c, folder, "CAN")
+	log = rec.dockposed_log()
+	rc = rec.dockposed_rc()
+	c.check(rc == 0, "dockposed exited 0 after --for", f"status {rc}; stderr:\n{log}")
+	c.check("camera libcamera" in log and "gpiochip" in log and "socketcan:vcan0" in log,
+			"dockposed started on libcamera, gpiod (gpio-sim) and socketcan (vcan0)", log.strip()[:400])
+	m = re.search(r"^dockposed: ([\d.]+) s: (\d+) frames .*$", log, re.M)
+	if m:
+		c.info(m.group(0))
+	cams = (rec.dir / "cam-list.txt").read_text(errors="replace") if (rec.dir / "cam-list.txt").exists() else ""
+	c.check("vimc" in cams, "cam -l lists the vimc camera", cams.strip())
+	info = (rec.dir / "gpioinfo.txt").read_text(errors="replace") if (rec.dir / "gpioinfo.txt").exists() else ""
+	line3 = next((ln.strip() for ln in info.splitlines() if re.match(r"\s*line\s+3:", ln)), "")
+	c.check('"led-strobe"' in line3 and "output" in line3 and "[used]" in line3,
+			f"gpioinfo while dockposed runs: {line3}", info.strip())
+
+	rec.check_decoding()
+	reports, beats = rec.reports, rec.heartbeats
+	pose_frames = [f for f in rec.frames if f["id"] in POSE_IDS]
+	c.check(not pose_frames and all(not r["valid"] for r in reports),
+			"no pose frames (vimc shows no target)", f"{len(pose_frames)} pose frames")
+	states = {r["state"] for r in reports[:-1]}
+	c.check(states <= {"STARTUP", "SEARCHING"} and "SEARCHING" in states,
+			f"status states before shutdown: {sorted(states)} (searching)")
+
+	# Heartbeats.
+	if len(beats) >= 2:
+		gaps = [b["timestamp"] - a["timestamp"] for a, b in zip(beats, beats[1:])]
+		span = beats[-1]["timestamp"] - beats[0]["timestamp"]
+		c.check(max(gaps) < 1.0, f"heartbeats: {len(beats)} at {(len(beats) - 1) / span:.1f} Hz "
+								 f"(board: 10 Hz), largest gap {max(gaps) * 1000:.0f} ms (< 1 s)")
+	else:
+		c.fail(f"heartbeats: only {len(beats)}")
+
+	# The commands: a corrupt one (rejected, nothing changes), then a good one.
+	if len(rec.commands) != 2:
+		c.fail(f"two DP_Command frames in the log, found {len(rec.commands)}")
+		return c
+	t_bad, t_good = rec.commands[0][0], rec.commands[1][0]
+	rc_all, objects, summary = candecode(rec.dir / "can.log")
+	cmds = [o for o in objects if o.get("type") == "command"]
+	errs = summary_errors(summary)
+	c.check(errs["crc"] == 1 and len(cmds) == 1 and cmds[0]["enable"] and cmds[0]["mode"] == "SEARCH_ONLY" and
+			cmds[0]["strobe"] == "CONSTANT",
+			"candecode on the whole bus: the corrupt command fails its CRC, the good one reads "
+			"enable, SEARCH_ONLY, CONSTANT", f"CRC errors {errs['crc']}, commands {cmds}")
+
+	before = [b for b in beats if b["timestamp"] < t_good]
+	after = [b for b in beats if b["timestamp"] > t_good]
+	c.check(before and all(b["mode"] == "TRACK" and b["strobe"] == "ALTERNATE" and b["enabled"] for b in before),
+			f"before the command: {len(before)} heartbeats say TRACK, ALTERNATE, enabled",
+			str({(b['mode'], b['strobe'], b['enabled']) for b in before}))
+	changed = [b for b in after if b["mode"] == "SEARCH_ONLY" and b["strobe"] == "CONSTANT"]
+	if changed:
+		t_change = changed[0]["timestamp"]
+		c.check(t_change - t_good < 1.0 and all(b in changed for b in after if b["timestamp"] >= t_change),
+				f"after the command: heartbeats say SEARCH_ONLY, CONSTANT from {t_change - t_good:.2f} s "
+				f"after it to the end ({len(changed)})",
+				str([(b['mode'], b['strobe']) for b in after]))
+	else:
+		c.fail("after the command: no heartbeat says SEARCH_ONLY, CONSTANT: "
+			   + str([(b['mode'], b['strobe']) for b in after]))
+		return c
+	rejected_flags = [o for o in reports + beats if o["fault_bits"] & FAULT_COMMAND_REJECTED]
+	c.check(rejected_flags and all(t_bad <= o["timestamp"] <= t_good + 1.5 for o in rejected_flags),
+			f"COMMAND_REJECTED set after the corrupt command only ({len(rejected_flags)} frames)",
+			str([round(o['timestamp'] - t_bad, 2) for o in rejected_flags]))
+	c.check("rejected: bad CRC" in log, "dockposed logged the corrupt command as 'bad CRC'")
+
+	alt = [r for r in reports if r["timestamp"] < t_good]
+	const = [r for r in reports[:-1] if r["timestamp"] > t_change]
+	c.check(all(r["strobe"] == "ALTERNATE" for r in alt) and all(r["strobe"] == "CONSTANT" for r in const),
+			"status frames: strobe ALTERNATE before the command, CONSTANT after it")
+	beats_alt = [b["frame_rate_hz"] for b in before if b["timestamp"] > before[0]["timestamp"] + 1.0]
+	if alt and len(alt) >= 2 and beats_alt:
+		span = alt[-1]["timestamp"] - alt[0]["timestamp"]
+		fr = sum(beats_alt) / len(beats_alt)
+		c.info(f"alternate phase: {len(alt)} status frames (lit frames) at "
+			   f"{(len(alt) - 1) / span if span > 0 else 0:.2f} Hz; camera frames handled {fr:.2f} Hz "
+			   f"(heartbeat FrameRate): lit share {((len(alt) - 1) / span) / fr if span > 0 and fr > 0 else 0:.2f} (ideal 0.5)")
+	c.check(len(alt) >= 1, f"alternate phase: {len(alt)} lit frames processed (LED pulses aimed at "
+						   "predicted exposures from the sensor's timestamps)")
+
+	# Status rate = camera rate in constant mode: every frame the loop takes is lit and processed.
+	# FrameRate (heartbeat) counts the frames the loop took over its last second.
+	t_end = reports[-1]["timestamp"]
+	fr_const = [b["frame_rate_hz"] for b in beats if t_change + 1.2 <= b["timestamp"] <= t_end]
+	if len(const) >= 4 and fr_const:
+		span = const[-1]["timestamp"] - const[0]["timestamp"]
+		rate = (len(const) - 1) / span
+		fr = sum(fr_const) / len(fr_const)
+		c.check(abs(rate - fr) <= 0.25 * fr + 0.5,
+				f"constant phase: status frames at {rate:.2f} Hz = the camera's frame rate {fr:.2f} Hz "
+				f"(heartbeat FrameRate, {len(fr_const)} heartbeats) within 25 % + 0.5 Hz")
+	else:
+		c.fail(f"constant phase: too little to measure a rate ({len(const)} status frames, "
+			   f"{len(fr_const)} heartbeats)")
+
+	# The LED line as gpio-sim saw it.
+	samples, marks = gpio_samples(folder)
+	if not all(k in marks for k in ("running", "good-command", "exit")):
+		c.fail(f"gpio.txt lacks marks: {sorted(marks)}")
+		return c
+	alt_s = [s for s in samples if marks["running"] <= s[0] < marks["good-command"]]
+	runs = high_runs(alt_s)
+	highs = sum(v for _, v in alt_s)
+	c.check(runs and highs < 0.5 * len(alt_s) and max(r[1] - r[0] for r in runs) < 0.2,
+			f"alternate phase: line 3 pulsed high {len(runs)} times in {len(alt_s)} samples, each "
+			f"pulse under 200 ms (longest {max((r[1] - r[0] for r in runs), default=0) * 1000:.0f} ms)",
+			f"{highs} high samples, runs {runs[:5]}")
+	const_s = [s for s in samples if marks["good-command"] + 1.5 <= s[0] < marks["exit"] - 2.0]
+	highs = sum(v for _, v in const_s)
+	c.check(const_s and highs >= 0.95 * len(const_s),
+			f"constant phase: line 3 high in {highs} of {len(const_s)} samples", "")
+	last_high = max((t for t, v in samples if v), default=None)
+	c.check(last_high is not None and last_high < marks["exit"],
+			"the line went low before dockposed exited (LED off at shutdown)")
+	after = (rec.dir / "gpio-after.txt").read_text().strip() if (rec.dir / "gpio-after.txt").exists() else "?"
+	c.check(after == "0", f"after exit (line released, gpio-sim pull-down): sim_gpio3/value = {after}")
+	return c
+
+
+# --------------------------------------------------------------------------- replay
+
+
+def poses_from_canmatrix(frames):
+	"""{frame counter: {signal: raw}} from per-frame canmatrix decodes: the five pose frames of a
+	sequence, then a status with PoseValid."""
+	pending, poses = {}, {}
+	for f in frames:
+		name = f["message"]
+		if name in POSE_MESSAGES:
+			pending[name] = f
+		elif name == "DP_Status":
+			seq = f["raw"]["Sequence"]
+			parts = {n: p for n, p in pending.items() if p["raw"]["Sequence"] == seq}
+			pending = {}
+			if f["raw"]["PoseValid"] and len(parts) == 5:
+				raw = {}
+				for n, sigs in POSE_SIGNALS.items():
+					for s in sigs:
+						raw[s] = parts[n]["raw"][s]
+				phys = {s: parts[n]["signals"][s] for n, sigs in POSE_SIGNALS.items() for s in sigs}
+				poses[parts["DP_QuatB"]["raw"]["FrameCounter"]] = {"raw": raw, "phys": phys,
+																   "state": STATES[f["raw"]["State"]]}
+	return poses
+
+
+def check_replay(truth_path, count, folders):
+	c = Checks()
+	truth = [json.loads(line) for line in pathlib.Path(truth_path).read_text().splitlines() if line.strip()]
+	c.check(len(truth) == count, f"render truth has {count} frames", f"{len(truth)}")
+	runs = []
+	for folder in folders:
+		label = pathlib.Path(folder).name
+		rec = Recording(c, folder, label)
+		log = rec.dockposed_log()
+		c.check(rec.dockposed_rc() == 0 and "the camera has no more frames" in log,
+				f"{label}: dockposed played every frame and exited 0",
+				f"status {rec.dockposed_rc()}; stderr:\n{log}")
+		m = re.search(r"^dockposed: ([\d.]+) s: (\d+) frames .*$", log, re.M)
+		if m:
+			c.info(m.group(0))
+		rec.check_decoding()
+		poses = poses_from_canmatrix(rec.frames)
+		from_candecode = {r["frame"]: r for r in rec.reports if r["valid"]}
+		same = set(poses) == set(from_candecode) and all(
+			[p["phys"][s] for s in ("Tx", "Ty", "Tz")] == from_candecode[k]["t_mm"] and
+			[p["phys"][s] for s in ("Roll", "Pan", "Tilt")] == from_candecode[k]["rpy_deg"]
+			for k, p in poses.items())
+		c.check(same, f"{label}: canmatrix and candecode give the same {len(poses)} poses")
+		c.check(len(poses) >= math.ceil(0.9 * count) and all(0 <= k < count for k in poses),
+				f"{label}: valid poses for {len(poses)} of {count} frames (>= 90 %)",
+				f"frames {sorted(poses)}")
+		c.check(any(p["state"] == "TRACKING" for p in poses.values()), f"{label}: reached TRACKING")
+		samples, _ = gpio_samples(folder)
+		c.check(samples and not any(v for _, v in samples),
+				f"{label}: strobe mode off: line 3 low in all {len(samples)} samples")
+
+		# Close to the render truth: within 3 sigma (as sent) + one step, per axis.
+		worst = [0.0] * 6
+		bad = []
+		for k, p in poses.items():
+			if not 0 <= k < len(truth):
+				continue
+			t = truth[k]
+			ph = p["phys"]
+			est = [ph["Tx"], ph["Ty"], ph["Tz"], ph["Roll"], ph["Pan"], ph["Tilt"]]
+			ref = list(t["t_mm"]) + list(t["rpy_deg"])
+			sig = [ph["SigmaTx"], ph["SigmaTy"], ph["SigmaTz"], ph["SigmaRoll"], ph["SigmaPan"], ph["SigmaTilt"]]
+			step = [0.1] * 3 + [0.01] * 3
+			for i in range(6):
+				err = abs(est[i] - ref[i])
+				worst[i] = max(worst[i], err)
+				if err > 3 * sig[i] + step[i]:
+					bad.append((k, i, round(err, 3), sig[i]))
+		c.check(not bad, f"{label}: every pose within 3 sigma of the truth; largest errors t "
+						 f"({worst[0]:.2f}, {worst[1]:.2f}, {worst[2]:.2f}) mm, rpy "
+						 f"({worst[3]:.3f}, {worst[4]:.3f}, {worst[5]:.3f}) deg", f"(frame, axis, err, sigma) {bad[:5]}")
+		runs.append((label, poses))
+
+	if len(runs) == 2:
+		(la, pa), (lb, pb) = runs
+		common = sorted(set(pa) & set(pb))
+		c.check(len(common) >= math.ceil(0.9 * count),
+				f"{len(common)} frames have a pose from both {la} and {lb} (>= 90 % of {count})")
+		worst = {s: 0 for n in POSE_SIGNALS.values() for s in n}
+		identical = 0
+		for k in common:
+			diffs = {s: abs(pa[k]["raw"][s] - pb[k]["raw"][s]) for s in worst}
+			identical += all(d == 0 for d in diffs.values())
+			for s, d in diffs.items():
+				worst[s] = max(worst[s], d)
+		c.check(all(d <= 1 for d in worst.values()),
+				f"{la} and {lb} poses equal within the protocol's resolution (at most one step of 0.1 mm, "
+				f"0.0001, 0.01 deg): {identical} of {len(common)} bit-identical",
+				"largest differences in steps: " + str({s: d for s, d in worst.items() if d}))
+		c.info("largest differences in steps: " + (str({s: d for s, d in worst.items() if d}) or "none"))
+	return c
+
+
+# --------------------------------------------------------------------------- replay board
+
+
+def write_replay_board(args):
+	board = json.loads(pathlib.Path(args.board).read_text())
+	camera = json.loads(pathlib.Path(args.camera).read_text())
+	cam = board["camera"]
+	cam["backend"] = "replay"
+	cam["replay"] = {"folder": str(pathlib.Path(args.frames).resolve()), "loop": False}
+	cam["width"], cam["height"] = camera["width"], camera["height"]
+	cam["frame_rate_hz"] = args.rate
+	cam["buffer_count"] = 16
+	cam["intrinsics"] = str(pathlib.Path(args.camera).resolve())
+	board["pipeline"]["target"] = str(pathlib.Path(args.target).resolve())
+	# The replayed frames show the LEDs whatever the line does: process every frame.
+	board["strobe"]["mode"] = "off"
+	pathlib.Path(args.out).write_text(json.dumps(board, indent="\t") + "\n")
+
+
+def main(argv):
+	p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+	sub = p.add_subparsers(dest="cmd", required=True)
+	cm = sub.add_parser("command")
+	cm.add_argument("--enable", type=int, choices=[0, 1], default=1)
+	cm.add_argument("--mode", choices=["track", "search_only"], default="track")
+	cm.add_argument("--strobe", choices=["off", "constant", "alternate", "unchanged"], default="unchanged")
+	cm.add_argument("--alive", type=int, required=True)
+	cm.add_argument("--bad-crc", action="store_true")
+	rb = sub.add_parser("replay-board")
+	rb.add_argument("--board", required=True)
+	rb.add_argument("--camera", required=True)
+	rb.add_argument("--target", required=True)
+	rb.add_argument("--frames", required=True)
+	rb.add_argument("--rate", type=float, required=True)
+	rb.add_argument("-o", "--out", required=True)
+	bd = sub.add_parser("board")
+	bd.add_argument("folder")
+	rp = sub.add_parser("replay")
+	rp.add_argument("--truth", required=True)
+	rp.add_argument("--frames", type=int, required=True)
+	rp.add_argument("folders", nargs=2)
+	args = p.parse_args(argv)
+
+	try:
+		if args.cmd == "command":
+			print(command_frame(args.enable, 1 if args.mode == "search_only" else 0,
+								["off", "constant", "alternate", "unchanged"].index(args.strobe),
+								args.alive, args.bad_crc))
+			return 0
+		if args.cmd == "replay-board":
+			write_replay_board(args)
+			return 0
+		checks = check_board(args.folder) if args.cmd == "board" else check_replay(
+			args.truth, args.frames, args.folders)
+	except Fatal as exc:
+		print(f"firmware_check: {exc}", file=sys.stderr)
+		return 2
+	print(f"{'FAILED' if checks.failures else 'passed'}: {checks.failures} check(s) failed")
+	return 1 if checks.failures else 0
+
+
+if __name__ == "__main__":
+	sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,163 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+#
+# The whole firmware (dockposed) in the test VMs, against real kernel drivers: vimc through
+# libcamera, gpio-sim through libgpiod, vcan through SocketCAN (docs/vm-tests.md, "Whole
+# firmware in the VMs"; ctest tests from tests/vm/firmware.cmake). The host half: prepares
+# the inputs, runs tests/vm/firmware_guest.sh in a VM with scripts/vm, then checks what the
+# guest recorded with tests/vm/firmware_check.py (candecode and canmatrix, on the host: the
+# arm64 guest has no python).
+#
+#   firmware_vm.sh [--timeout S] board ARCH DOCKPOSED OUT
+#       dockposed on board/vm/board.json in the ARCH (x86_64 | aarch64) VM for RUN_S seconds,
+#       a corrupt then a good DP_Command on vcan0 while it runs.
+#   firmware_vm.sh [--timeout S] replay DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT
+#       frames of the wedge target rendered with `dockpose render`, replayed by both builds in
+#       their VMs on a replay variant of the vm board; their pose frames compared.
+#
+# OUT is emptied and used as the VMs' share; everything recorded stays there.
+# Exit status: 0 passed, 1 failed, 77 the VM cannot run here (ctest: skipped).
+set -euo pipefail
+
+HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+REPO=$(cd "$HERE/../.." && pwd)
+VM=$REPO/scripts/vm
+GUEST=$HERE/firmware_guest.sh
+CHECK=$HERE/firmware_check.py
+BOARD=$REPO/board/vm/board.json
+
+# The board run: dockposed runs RUN_S seconds from its first heartbeat; the corrupt command
+# goes out BAD_AT_S seconds after it, the good one GOOD_AT_S seconds after it.
+RUN_S=${DOCKPOSE_VM_FW_RUN_S:-20}
+BAD_AT_S=7
+GOOD_AT_S=8
+# The replay run: frames and their rate (low: the pipeline under TCG is slow, and the replay
+# camera never skips a frame, it queues them).
+REPLAY_FRAMES=30
+REPLAY_RATE_HZ=5
+
+timeout_s=600
+
+die() {
+	echo "firmware_vm: $*" >&2
+	exit 1
+}
+
+# elf_machine FILE: x86_64, aarch64 or something else, from the ELF header's e_machine.
+elf_machine() {
+	local m
+	m=$(od -An -tx1 -j18 -N2 "$1" 2>/dev/null | tr -d ' \n')
+	case $m in
+	3e00) echo x86_64 ;;
+	b700) echo aarch64 ;;
+	*) echo "unknown (e_machine $m)" ;;
+	esac
+}
+
+# need_dockposed ARCH FILE
+need_dockposed() {
+	local arch=$1 file=$2
+	if [[ ! -x $file ]]; then
+		if [[ $arch == aarch64 ]]; then
+			die "no aarch64 dockposed at $file: build it first with" \
+				"'cmake --preset aarch64 && cmake --build --preset aarch64 --target dockposed'" \
+				"(scripts/test builds the aarch64 tree before it runs the vm label), or point" \
+				"DOCKPOSE_AARCH64_BUILD_DIR at another aarch64 build"
+		fi
+		die "no dockposed at $file"
+	fi
+	local got
+	got=$(elf_machine "$file")
+	[[ $got == "$arch" ]] || die "$file is built for $got, not $arch"
+}
+
+# in_vm ARCH SHARE GUEST-ARGS...: run the guest script; 77 and harness errors end the test.
+in_vm() {
+	local arch=$1 share=$2
+	shift 2
+	local rc=0 start=$SECONDS
+	echo "== $arch VM: firmware_guest.sh $1"
+	"$VM" run --arch "$arch" --share "$share" --timeout "$timeout_s" -- "$GUEST" "$@" || rc=$?
+	echo "== $arch VM: exit status $rc after $((SECONDS - start)) s"
+	if [[ -f $share/dockposed.err ]]; then
+		echo "-- dockposed's stderr:"
+		cat "$share/dockposed.err"
+	fi
+	case $rc in
+	0) ;;
+	77) echo "firmware_vm: the $arch VM cannot run here: skipped" >&2; exit 77 ;;
+	*) die "the $arch guest failed (status $rc)" ;;
+	esac
+}
+
+fresh_dir() {
+	rm -rf -- "$1"
+	mkdir -p -- "$1"
+}
+
+board_test() {
+	[[ $# -eq 3 ]] || die "board: want ARCH DOCKPOSED OUT"
+	local arch=$1 dockposed=$2 out=$3
+	[[ $arch == arm64 ]] && arch=aarch64
+	need_dockposed "$arch" "$dockposed"
+	fresh_dir "$out"
+	local bad good
+	# Corrupt CRC, asks for strobe off: must be rejected and change nothing.
+	bad=$("$CHECK" command --enable 1 --mode track --strobe off --alive 0 --bad-crc)
+	# Good: search only, strobe constant.
+	good=$("$CHECK" command --enable 1 --mode search_only --strobe constant --alive 1)
+	echo "commands: corrupt $bad at $BAD_AT_S s, good $good at $GOOD_AT_S s; run $RUN_S s"
+	in_vm "$arch" "$out" board "$out" "$dockposed" "$BOARD" "$RUN_S" "$BAD_AT_S" "$bad" "$GOOD_AT_S" "$good"
+	echo "== checks ($out)"
+	"$CHECK" board "$out"
+}
+
+replay_test() {
+	[[ $# -eq 4 ]] || die "replay: want DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT"
+	local x86=$1 arm=$2 tool=$3 out=$4
+	need_dockposed x86_64 "$x86"
+	need_dockposed aarch64 "$arm"
+	[[ -x $tool ]] || die "no dockpose tool at $tool"
+	fresh_dir "$out"
+	mkdir -p "$out/x86_64" "$out/aarch64"
+
+	# An approach: 1400 mm to 550 mm, drifting to the centre, rotations easing off.
+	local poses=() i
+	for ((i = 0; i < REPLAY_FRAMES; i++)); do
+		poses+=("--pose=$(awk -v i=$i -v n=$REPLAY_FRAMES 'BEGIN {
+			s = i / (n - 1)
+			printf "%.1f,%.1f,%.1f,%.2f,%.2f,%.2f", 120 - 90 * s, -60 + 50 * s, 1400 - 850 * s,
+				4 - 3 * s, 12 - 10 * s, -3 + 2.5 * s }')")
+	done
+	"$tool" render --target "$REPO/board/vm/target.json" --camera "$REPO/board/vm/camera-replay.json" \
+		"${poses[@]}" --reflections 1 --hot-pixels 10 -o "$out/frames" >/dev/null ||
+		die "dockpose render failed"
+	"$CHECK" replay-board --board "$BOARD" --camera "$REPO/board/vm/camera-replay.json" \
+		--target "$REPO/board/vm/target.json" --frames "$out/frames" --rate "$REPLAY_RATE_HZ" \
+		-o "$out/board-replay.json" || die "cannot write the replay board"
+	echo "rendered $REPLAY_FRAMES frames into $out/frames; replay board $out/board-replay.json"
+
+	# Runs until the frames run out; --for only bounds a hang.
+	local max_s=$((REPLAY_FRAMES * 4 / REPLAY_RATE_HZ + 60))
+	in_vm x86_64 "$out/x86_64" replay "$out/x86_64" "$x86" "$out/board-replay.json" "$max_s"
+	in_vm aarch64 "$out/aarch64" replay "$out/aarch64" "$arm" "$out/board-replay.json" "$max_s"
+	echo "== checks ($out)"
+	"$CHECK" replay --truth "$out/frames/truth.jsonl" --frames "$REPLAY_FRAMES" "$out/x86_64" "$out/aarch64"
+}
+
+while [[ $# -gt 0 ]]; do
+	case $1 in
+	--timeout) timeout_s=${2:?--timeout needs seconds}; shift 2 ;;
+	--) shift; break ;;
+	-*) die "unknown option $1" ;;
+	*) break ;;
+	esac
+done
+[[ $# -ge 1 ]] || die "usage: firmware_vm.sh [--timeout S] board|replay ..."
+cmd=$1
+shift
+case $cmd in
+board) board_test "$@" ;;
+replay) replay_test "$@" ;;
+*) die "unknown test '$cmd' (board or replay)" ;;
+esac
