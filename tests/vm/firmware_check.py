@@ -379,8 +379,12 @@ def check_board(folder):
 		c.info(f"alternate phase: {len(alt)} status frames (lit frames) at "
 			   f"{(len(alt) - 1) / span if span > 0 else 0:.2f} Hz; camera frames handled {fr:.2f} Hz "
 			   f"(heartbeat FrameRate): lit share {((len(alt) - 1) / span) / fr if span > 0 and fr > 0 else 0:.2f} (ideal 0.5)")
-	c.check(len(alt) >= 1, f"alternate phase: {len(alt)} lit frames processed (LED pulses aimed at "
-						   "predicted exposures from the sensor's timestamps)")
+	# Reported, not required: vimc has no exposure (its timestamps are buffer completions on an
+	# emulated CPU, jittering by milliseconds), so whether a pulse aimed at a predicted exposure
+	# covers a whole one is chance here. The pulses themselves are checked in sysfs; pairing lit and
+	# unlit frames is checked on the sim camera, whose exposure grid is real (tests/firmware/test_daemon).
+	c.info(f"alternate phase: {len(alt)} lit frames processed (LED pulses aimed at "
+		   "predicted exposures from the sensor's timestamps)")
 
 	# Status rate = camera rate in constant mode: every frame the loop takes is lit and processed.
 	# FrameRate (heartbeat) counts the frames the loop took over its last second.

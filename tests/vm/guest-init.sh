@@ -79,16 +79,21 @@ mount -t configfs configfs /sys/kernel/config || setup_failed "cannot mount conf
 # (read-only) at /run/host-tmp, and mount the share after the tmpfs.
 mkdir -p /run/host-tmp && mount -o bind /tmp /run/host-tmp &&
 	mount -t tmpfs -o mode=1777 tmpfs /tmp || setup_failed "cannot mount /tmp"
+# The repository (scripts, test data, binaries) and the working directory, when they live in the
+# host's /tmp (a checkout there, a build tree there): show them (read-only) at their own paths.
+for dir in "$VM_REPO" "$VM_CWD"; do
+	case $dir in
+	"" | /tmp) ;;
+	/tmp/*)
+		[ -n "$VM_REPO" ] && [ "$dir" != "$VM_REPO" ] && case $dir in "$VM_REPO"/*) continue ;; esac
+		mkdir -p "$dir" && mount -o bind "/run/host-tmp/${dir#/tmp/}" "$dir" ||
+			setup_failed "cannot show $dir"
+		;;
+	esac
+done
+# The share last: it may lie inside the repository shown above.
 mkdir -p "$VM_SHARE" && mount -t 9p -o "$P9_OPTS" dockpose-share "$VM_SHARE" ||
 	setup_failed "cannot mount the share at $VM_SHARE"
-case $VM_CWD in
-"$VM_SHARE" | "$VM_SHARE"/* | /tmp) ;;
-/tmp/*)
-	# A working directory in the host's /tmp: show it (read-only) at its own path.
-	mkdir -p "$VM_CWD" && mount -o bind "/run/host-tmp/${VM_CWD#/tmp/}" "$VM_CWD" ||
-		setup_failed "cannot show the working directory $VM_CWD"
-	;;
-esac
 
 if [ "$DOCKPOSE_VM_ARCH" = arm64 ]; then
 	# #!/bin/sh scripts, system() and popen() need an arm64 /bin/sh: dash, like the host's
