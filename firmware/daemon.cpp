@@ -170,6 +170,8 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 			handleStall(now_ns);
 		}
 
+		/* A frame may have taken a while (the pipeline): heartbeat and watchdog at the time now. */
+		now_ns = hal::monotonicNs();
 		if (now_ns >= next_heartbeat_ns_)
 			sendHeartbeat(now_ns);
 		backends_.can->poll();

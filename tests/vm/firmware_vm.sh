@@ -34,7 +34,7 @@ GOOD_AT_S=8
 # The replay run: frames and their rate (low: the pipeline under TCG is slow, and the replay
 # camera never skips a frame, it queues them).
 REPLAY_FRAMES=30
-REPLAY_RATE_HZ=5
+REPLAY_RATE_HZ=10
 
 timeout_s=600
 
