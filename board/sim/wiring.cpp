@@ -24,7 +24,35 @@ constexpr const char *kCameras[] = { "synthetic", "replay" };
 constexpr const char *kStrobes[] = { "recording" };
 constexpr const char *kCans[] = { "file" };
 
+/* The synthetic camera's scene from the board file's camera.synthetic section. */
+hal::SyntheticScene syntheticScene(const firmware::SyntheticCameraConfig &s)
+{
+	hal::SyntheticScene scene{};
+	for (int i = 0; i < 6; ++i) {
+		scene.from[i] = s.from[i];
+		scene.to[i] = s.to[i];
+	}
+	scene.duration_s = s.duration_s;
+	scene.loop = s.loop;
+	scene.reflections = s.reflections;
+	scene.glints = s.glints;
+	scene.hot_pixels = s.hot_pixels;
+	scene.noise_sigma = s.noise_sigma;
+	scene.seed = s.seed;
+	return scene;
+}
+
 hal::Status wire(const firmware::BoardConfig &config, Backends *out)
+{
+	if (config.can.log_file.empty())
+		return hal::Status::error("can.log_file: the sim board writes CAN frames to a candump log; "
+					  "name one in the board file or with --can-log FILE");
+	return wireSimulated(config, std::make_unique<hal::FileCanBus>(config.can.log_file), out);
+}
+
+} /* namespace */
+
+hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<hal::CanBus> can, Backends *out)
 {
 	auto strobe = std::make_unique<hal::RecordingStrobe>();
 	out->strobe_control = std::make_unique<hal::StrobeController>(strobe.get(), config.camera.stall_timeout_ms);
@@ -44,31 +72,10 @@ hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 		out->camera = std::make_unique<hal::ReplayCamera>(config.camera.replay.folder, config.camera.replay.loop);
 	}
 
-	if (config.can.log_file.empty())
-		return hal::Status::error("can.log_file: the sim board writes CAN frames to a candump log; "
-					  "name one in the board file or with --can-log FILE");
-	out->can = std::make_unique<hal::FileCanBus>(config.can.log_file);
+	out->can = std::move(can);
 	return hal::Status::ok();
 }
 
-} /* namespace */
-
-hal::SyntheticScene syntheticScene(const firmware::SyntheticCameraConfig &s)
-{
-	hal::SyntheticScene scene{};
-	for (int i = 0; i < 6; ++i) {
-		scene.from[i] = s.from[i];
-		scene.to[i] = s.to[i];
-	}
-	scene.duration_s = s.duration_s;
-	scene.loop = s.loop;
-	scene.reflections = s.reflections;
-	scene.glints = s.glints;
-	scene.hot_pixels = s.hot_pixels;
-	scene.noise_sigma = s.noise_sigma;
-	scene.seed = s.seed;
-	return scene;
-}
 
 extern const BoardInfo kSimBoard;
 const BoardInfo kSimBoard{ "sim", "host simulation: synthetic or replayed frames, recording strobe, candump-log CAN",

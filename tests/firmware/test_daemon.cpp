@@ -20,7 +20,6 @@
 
 #include <Eigen/Geometry>
 
-#include "algo/io/model_json.h"
 #include "board/sim/sim_board.h"
 #include "firmware/config.h"
 #include "firmware/daemon.h"
@@ -55,20 +54,12 @@ public:
 	{
 		hub_ = std::make_shared<hal::LoopbackHub>();
 		board::Backends b;
-		auto strobe = std::make_unique<hal::RecordingStrobe>();
-		strobe_ = strobe.get();
-		b.strobe_control = std::make_unique<hal::StrobeController>(strobe.get(), config.camera.stall_timeout_ms);
-		b.strobe = std::move(strobe);
-
-		auto target = loadTargetModel(config.pipeline.target);
-		auto intrinsics = loadCameraIntrinsics(config.camera.intrinsics);
-		EXPECT_TRUE(target.ok() && intrinsics.ok());
-		const hal::SyntheticScene scene = board::syntheticScene(config.camera.synthetic);
-		auto camera = std::make_unique<hal::SyntheticCamera>(target.value, intrinsics.value, scene,
-								     b.strobe_control.get());
-		camera_ = camera.get();
-		b.camera = std::move(camera);
-		b.can = std::make_unique<hal::LoopbackCanBus>(hub_, "sensor");
+		const hal::Status wired =
+			board::wireSimulated(config, std::make_unique<hal::LoopbackCanBus>(hub_, "sensor"), &b);
+		EXPECT_TRUE(wired.isOk()) << wired.message();
+		/* The sim wiring's types, as board.json's camera.backend is "synthetic". */
+		strobe_ = static_cast<hal::RecordingStrobe *>(b.strobe.get());
+		camera_ = static_cast<hal::SyntheticCamera *>(b.camera.get());
 
 		log_ = log ? log : std::tmpfile();
 		daemon_ = std::make_unique<Daemon>(config, std::move(b), log_);

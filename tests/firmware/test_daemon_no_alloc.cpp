@@ -14,14 +14,11 @@
 #include <new>
 #include <thread>
 
-#include "algo/io/model_json.h"
 #include "../common/counting_allocator.h"
 #include "board/sim/sim_board.h"
 #include "firmware/config.h"
 #include "firmware/daemon.h"
 #include "hal/sim/loopback_can_bus.h"
-#include "hal/sim/recording_strobe.h"
-#include "hal/sim/synthetic_camera.h"
 
 namespace dockpose::firmware {
 namespace {
@@ -52,15 +49,7 @@ TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
 
 	auto hub = std::make_shared<hal::LoopbackHub>();
 	board::Backends b;
-	auto strobe = std::make_unique<hal::RecordingStrobe>();
-	b.strobe_control = std::make_unique<hal::StrobeController>(strobe.get(), config.camera.stall_timeout_ms);
-	b.strobe = std::move(strobe);
-	auto target = loadTargetModel(config.pipeline.target);
-	auto intrinsics = loadCameraIntrinsics(config.camera.intrinsics);
-	ASSERT_TRUE(target.ok() && intrinsics.ok());
-	const hal::SyntheticScene scene = board::syntheticScene(config.camera.synthetic);
-	b.camera = std::make_unique<hal::SyntheticCamera>(target.value, intrinsics.value, scene, b.strobe_control.get());
-	b.can = std::make_unique<hal::LoopbackCanBus>(hub, "sensor");
+	ASSERT_TRUE(board::wireSimulated(config, std::make_unique<hal::LoopbackCanBus>(hub, "sensor"), &b).isOk());
 
 	std::FILE *log = std::tmpfile();
 	Daemon daemon(config, std::move(b), log);

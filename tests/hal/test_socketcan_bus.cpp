@@ -25,68 +25,18 @@
 #include <gtest/gtest.h>
 
 /*
- * Allocation counting for the no-allocation test: operator new and the malloc
- * family are counted while armed (not under AddressSanitizer, which owns them).
+ * Allocation counting for the no-allocation test (tests/common/counting_allocator.h),
+ * not under AddressSanitizer, which owns operator new and malloc.
  */
-namespace {
-std::atomic<bool> g_count_allocations{ false };
-std::atomic<long> g_allocations{ 0 };
-
-[[maybe_unused]] void countAllocation()
-{
-	if (g_count_allocations.load(std::memory_order_relaxed))
-		g_allocations.fetch_add(1, std::memory_order_relaxed);
-}
-} /* namespace */
-
 #if defined(__SANITIZE_ADDRESS__)
 #define DOCKPOSE_COUNTS_ALLOCATIONS 0
+namespace dockpose::test {
+inline std::atomic<long> g_allocations{ 0 };
+inline std::atomic<bool> g_armed{ false };
+} /* namespace dockpose::test */
 #else
 #define DOCKPOSE_COUNTS_ALLOCATIONS 1
-
-/* The replacement operator delete frees what the replacement operator new took from malloc. */
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-
-extern "C" void *__libc_malloc(std::size_t);
-extern "C" void *__libc_calloc(std::size_t, std::size_t);
-extern "C" void *__libc_realloc(void *, std::size_t);
-
-void *operator new(std::size_t size)
-{
-	countAllocation();
-	if (void *p = __libc_malloc(size ? size : 1))
-		return p;
-	throw std::bad_alloc();
-}
-void *operator new[](std::size_t size)
-{
-	countAllocation();
-	if (void *p = __libc_malloc(size ? size : 1))
-		return p;
-	throw std::bad_alloc();
-}
-void operator delete(void *p) noexcept { std::free(p); }
-void operator delete[](void *p) noexcept { std::free(p); }
-void operator delete(void *p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void *p, std::size_t) noexcept { std::free(p); }
-
-extern "C" {
-void *malloc(std::size_t size)
-{
-	countAllocation();
-	return __libc_malloc(size);
-}
-void *calloc(std::size_t n, std::size_t size)
-{
-	countAllocation();
-	return __libc_calloc(n, size);
-}
-void *realloc(void *p, std::size_t size)
-{
-	countAllocation();
-	return __libc_realloc(p, size);
-}
-}
+#include "../common/counting_allocator.h"
 #endif
 
 namespace dockpose::hal {
@@ -637,8 +587,8 @@ TEST(SocketCanBus, FramePathNeverAllocates)
 	h.io->addRead(errorFrame(CAN_ERR_RESTARTED));
 	CanFrame f;
 
-	g_allocations = 0;
-	g_count_allocations = true;
+	test::g_allocations = 0;
+	test::g_armed = true;
 	for (int i = 0; i < 10; ++i)
 		h.bus->send(frame(0x300 + i));
 	h.io->accept_writes = 0;
@@ -661,16 +611,16 @@ TEST(SocketCanBus, FramePathNeverAllocates)
 	h.bus->poll();
 	(void)h.bus->stats();
 	(void)h.bus->rxDropped();
-	g_count_allocations = false;
+	test::g_armed = false;
 
-	EXPECT_EQ(g_allocations.load(), 0);
+	EXPECT_EQ(test::g_allocations.load(), 0);
 	EXPECT_EQ(h.io->opens, 3);
 
 	/* The counter does count: lastError() returns a new string. */
-	g_count_allocations = true;
+	test::g_armed = true;
 	const std::string error = h.bus->lastError();
-	g_count_allocations = false;
-	EXPECT_GT(g_allocations.load(), 0) << error;
+	test::g_armed = false;
+	EXPECT_GT(test::g_allocations.load(), 0) << error;
 	EXPECT_EQ(h.bus->stats().restarts, 2u);	/* one error frame, one reopening */
 	EXPECT_EQ(h.bus->stats().state, CanState::ErrorActive);
 }

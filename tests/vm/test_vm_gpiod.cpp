@@ -140,6 +140,7 @@ extern "C" void gpiod_line_release(gpiod_line *line)
 #include <gtest/gtest.h>
 
 #include "hal/clock.h"
+#include "vm_shell.h"
 #include "hal/gpiod/gpiod_strobe.h"
 
 extern char **environ;
@@ -185,25 +186,9 @@ void setPull(const char *pull, int line = kLine)
 	ASSERT_TRUE(out) << "cannot write " << pull << " to " << path;
 }
 
-struct CommandResult {
-	int status = -1;
-	std::string output;
-};
-
-CommandResult run(const std::string &command)
-{
-	CommandResult r;
-	FILE *p = popen((command + " 2>&1").c_str(), "r");
-	if (!p)
-		return r;
-	std::array<char, 4096> buf;
-	std::size_t n;
-	while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0)
-		r.output.append(buf.data(), n);
-	const int status = pclose(p);
-	r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-	return r;
-}
+using dockpose::vmtest::CommandResult;
+using dockpose::vmtest::run;
+using dockpose::vmtest::waitUntil;
 
 /* gpioinfo's line for `line` of the chip, found by its label like the backend does. */
 std::string gpioinfoLine(int line = kLine)
@@ -231,16 +216,6 @@ void armReleaseProbe()
 	g_releases = 0;
 }
 
-bool waitUntil(const std::function<bool()> &done, int timeout_ms)
-{
-	const std::int64_t end_ns = monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
-	while (!done()) {
-		if (monotonicNs() > end_ns)
-			return done();
-		std::this_thread::sleep_for(std::chrono::milliseconds(5));
-	}
-	return true;
-}
 
 /* A child process with its stdin and stdout on pipes (stderr inherited). */
 class Child

@@ -54,6 +54,7 @@
 #include <libcamera/controls.h>
 
 #include "hal/clock.h"
+#include "vm_shell.h"
 #include "hal/libcamera/libcamera_camera.h"
 
 /* The replacement operator delete frees what the replacement operator new took from malloc. */
@@ -264,25 +265,8 @@ constexpr int kWidth = 636;	/* a size vimc delivers (multiples of 6) */
 constexpr int kHeight = 480;
 constexpr int kFrameTimeoutMs = 10000;
 
-struct CommandResult {
-	int status = -1;
-	std::string output;
-};
-
-CommandResult run(const std::string &command)
-{
-	CommandResult r;
-	FILE *p = popen((command + " 2>&1").c_str(), "r");
-	if (!p)
-		return r;
-	std::array<char, 4096> buf;
-	std::size_t n;
-	while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0)
-		r.output.append(buf.data(), n);
-	const int status = pclose(p);
-	r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-	return r;
-}
+using dockpose::vmtest::CommandResult;
+using dockpose::vmtest::run;
 
 /* The camera ids `cam -l` lists: "1: 'Sensor B' (platform/vimc.0 Sensor B)". */
 std::vector<std::string> camToolIds()

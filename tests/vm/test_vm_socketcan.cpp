@@ -57,6 +57,7 @@
 #include <gtest/gtest.h>
 
 #include "hal/clock.h"
+#include "vm_shell.h"
 #include "hal/socketcan/socketcan_bus.h"
 
 extern char **environ;
@@ -72,46 +73,12 @@ using dockpose::hal::SocketCanBus;
 using dockpose::hal::canStateName;
 using dockpose::hal::monotonicNs;
 
-struct CommandResult {
-	int status = -1;	/* exit status, -1 when it did not exit normally */
-	std::string output;	/* stdout and stderr */
-};
+using dockpose::vmtest::CommandResult;
+using dockpose::vmtest::mustRun;
+using dockpose::vmtest::run;
+using dockpose::vmtest::waitUntil;
 
-/* Run a shell command, capturing its output. */
-CommandResult run(const std::string &command)
-{
-	CommandResult r;
-	FILE *p = popen((command + " 2>&1").c_str(), "r");
-	if (!p) {
-		r.output = "popen failed: " + std::string(std::strerror(errno));
-		return r;
-	}
-	std::array<char, 4096> buf;
-	std::size_t n;
-	while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0)
-		r.output.append(buf.data(), n);
-	const int status = pclose(p);
-	r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-	return r;
-}
 
-/* Run a command that must succeed (a test's own setup). */
-void mustRun(const std::string &command)
-{
-	const CommandResult r = run(command);
-	ASSERT_EQ(r.status, 0) << command << ":\n" << r.output;
-}
-
-bool waitUntil(const std::function<bool()> &done, int timeout_ms)
-{
-	const std::int64_t end_ns = monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
-	while (!done()) {
-		if (monotonicNs() > end_ns)
-			return done();
-		std::this_thread::sleep_for(std::chrono::milliseconds(5));
-	}
-	return true;
-}
 
 bool interfaceExists(const std::string &name)
 {
