@@ -47,6 +47,13 @@ struct Blob {
 	double fill = 1.0;	       /* area / (pi * 4 sigma_major sigma_minor), ~1 for a disc */
 	std::uint8_t peak = 0;
 	std::uint16_t x_min = 0, x_max = 0, y_min = 0, y_max = 0;
+	/*
+	 * Covariance of the centroid (u, v) in px^2, from the frame's measured
+	 * noise, the blob's intensity moments and its saturation (0 when unknown:
+	 * consumers then fall back to RefineOptions::sigma_px).
+	 */
+	double cov_uu_px2 = 0.0, cov_uv_px2 = 0.0, cov_vv_px2 = 0.0;
+	int saturated_px = 0; /* pixels at the sensor's clip level */
 };
 
 struct BlobFilterConfig {

@@ -40,6 +40,13 @@ struct PoseResult {
 	Eigen::Quaterniond q = Eigen::Quaterniond::Identity(); /* w >= 0 */
 	Eigen::Vector3d rpy_deg = Eigen::Vector3d::Zero();     /* roll, pan, tilt */
 	double rms_px = 0.0;
+	/*
+	 * log10 of the number of false alarms of the accepted match: the expected
+	 * number of equally good chance matches in this frame (a-contrario; see
+	 * algo/correspondence.h). Accepted poses have log10_nfa <= the configured
+	 * bound (default -4); more negative is more certain.
+	 */
+	double log10_nfa = 0.0;
 	int leds_used = 0;
 	std::uint32_t led_mask = 0; /* bit i: model LED i matched */
 	Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();

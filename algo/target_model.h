@@ -21,6 +21,20 @@ struct TargetModel {
 	std::string name;
 	StaticVector<Eigen::Vector3d, kMaxLeds> points_mm;
 	StaticVector<std::array<int, 4>, kMaxFaces> faces;
+	/* Optional: 1-sigma tolerance of each LED's position, mm, isotropic ("led_sigma_mm"; 0: exact). */
+	double led_sigma_mm = 0.0;
+	/*
+	 * Optional approach prior ("approach": {"axis": [x, y, z], "max_deg": a}):
+	 * poses that put the camera more than max_deg from `axis` (a unit vector
+	 * in the target frame, from the LEDs' centroid towards the camera) are not
+	 * considered. Without it, the target may be seen from any side its LEDs
+	 * face.
+	 */
+	struct Approach {
+		bool set = false;
+		Eigen::Vector3d axis = -Eigen::Vector3d::UnitZ();
+		double max_deg = 180.0;
+	} approach;
 
 	/*
 	 * Check the model: capacities, indices in range, distinct LEDs, every
