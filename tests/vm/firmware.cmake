@@ -33,13 +33,16 @@ else()
 	function(_dockpose_fw_test name fixtures)
 		add_test(NAME ${name} COMMAND ${_fw_script} --timeout ${DOCKPOSE_VM_TIMEOUT_S} ${ARGN}
 			WORKING_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR})
-		# One VM at a time per test (TCG keeps a core busy).
+		# One VM at a time per test (TCG keeps a core busy), and one VM test at a time
+		# (DOCKPOSE_VM_GUEST_LOCK, tests/vm/CMakeLists.txt): the firmware's timing is what the
+		# guest delivers, and a second guest beside it halves that.
 		set_tests_properties(${name} PROPERTIES
 			LABELS vm
 			FIXTURES_REQUIRED "${fixtures}"
 			SKIP_RETURN_CODE 77
 			TIMEOUT ${_fw_ctest_timeout}
-			PROCESSORS 1)
+			PROCESSORS 1
+			RESOURCE_LOCK ${DOCKPOSE_VM_GUEST_LOCK})
 	endfunction()
 
 	_dockpose_fw_test(vm_x86_64_dockposed_vm_board vm_kernel_x86_64
