@@ -205,7 +205,7 @@ void Daemon::shutdown()
 	status.enabled = enabled_;
 	status.strobe = can::StrobeMode::Off;
 	status.faults = last_faults_;
-	can::RawFrame frames[6];
+	can::RawFrame frames[can::kReportFrames];
 	const int n = encoder_.encodeReport(status, nullptr, frames);
 	sendFrames(frames, n);
 	/* Give the last frames a moment to leave a busy queue, without hanging. */
@@ -343,6 +343,7 @@ void Daemon::processView(const ImageView &view, const hal::Frame &frame)
 		pose.q[1] = result->q.x();
 		pose.q[2] = result->q.y();
 		pose.q[3] = result->q.z();
+		pose.log10_nfa = result->log10_nfa;
 	}
 
 	/* Latency up to this send, from the start of the exposure. */
@@ -350,7 +351,7 @@ void Daemon::processView(const ImageView &view, const hal::Frame &frame)
 	const std::int64_t latency_ns = frame.timestamp_ns > 0 ? send_ns - frame.timestamp_ns : 0;
 	status.latency_ms = static_cast<double>(latency_ns) * 1e-6;
 
-	can::RawFrame frames[6];
+	can::RawFrame frames[can::kReportFrames];
 	const int n = encoder_.encodeReport(status, pose_valid ? &pose : nullptr, frames);
 	sendFrames(frames, n);
 	++stats_.reports;
@@ -459,7 +460,7 @@ void Daemon::sendStatusOnly(std::int64_t now_ns)
 	status.enabled = enabled_;
 	status.strobe = toCan(strobe_mode_);
 	status.faults = faults;
-	can::RawFrame frames[6];
+	can::RawFrame frames[can::kReportFrames];
 	const int n = encoder_.encodeReport(status, nullptr, frames);
 	sendFrames(frames, n);
 	++stats_.stall_reports;

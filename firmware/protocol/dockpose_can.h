@@ -15,8 +15,9 @@
  *            frame's report (0 in heartbeat and command)
  *   byte 7   CRC-8 SAE J1850 over [id & 0xff, (id >> 8) & 0x07, data[0..6]]
  *
- * A report is the five pose frames (only when the pose is valid) followed by
- * the status frame; the status frame completes the report.
+ * A report is the six pose frames (only when the pose is valid: translation,
+ * quaternion A and B, angles, sigma, quality, in that order) followed by the
+ * status frame; the status frame completes the report.
  *
  * Units: millimetres, degrees, pixels, milliseconds, hertz, microseconds, as
  * in the field names. Threads: an Encoder or Decoder belongs to one thread.
@@ -36,8 +37,8 @@ constexpr std::uint32_t kDbcBaseId = 0x300;
 /* base .. base + kCommand must stay 11-bit. */
 constexpr std::uint32_t kMaxBaseId = 0x7ff - 0x10;
 constexpr std::uint8_t kFrameLength = 8;
-/* Frames in a report with a pose: five pose frames and the status. */
-constexpr int kReportFrames = 6;
+/* Frames in a report with a pose: six pose frames and the status. */
+constexpr int kReportFrames = 7;
 
 constexpr bool validBaseId(std::uint32_t base_id)
 {
@@ -52,8 +53,39 @@ enum Offset : std::uint32_t {
 	kSigma = 0x4,
 	kStatus = 0x5,
 	kHeartbeat = 0x6,
+	kQuality = 0x7,		/* a pose frame, sent before the status */
 	kCommand = 0x10,
 };
+
+/*
+ * Where a scaled signal sits, as its SG_ line in the DBC declares it: the
+ * message (base id + offset), start bit (Intel byte order, bit 0 = LSB of
+ * byte 0), length, sign and factor (offset 0). The encoder and decoder use
+ * these and nothing else for the signal; tests/firmware/test_can_protocol.cpp
+ * checks each against the DBC.
+ */
+struct SignalLayout {
+	std::uint32_t offset;
+	unsigned int start_bit;
+	unsigned int length_bits;
+	bool is_signed;
+	double factor;
+
+	constexpr std::int64_t rawMin() const
+	{
+		return is_signed ? -(std::int64_t{ 1 } << (length_bits - 1)) : 0;
+	}
+	constexpr std::int64_t rawMax() const
+	{
+		return is_signed ? (std::int64_t{ 1 } << (length_bits - 1)) - 1
+				 : (std::int64_t{ 1 } << length_bits) - 1;
+	}
+};
+
+namespace layout {
+/* DP_Quality Log10Nfa: -3276.8 .. 3276.7 in steps of 0.1. */
+constexpr SignalLayout kLog10Nfa{ kQuality, 0, 16, true, 0.1 };
+} /* namespace layout */
 
 enum class SensorState : std::uint8_t { Startup = 0, Searching, Tracking, Degraded, Fault, Shutdown };
 enum class StrobeMode : std::uint8_t { Off = 0, Constant = 1, Alternate = 2, Unchanged = 3 };
@@ -154,9 +186,9 @@ constexpr int worstCaseFrameBits(int data_bytes)
 }
 
 /* Fraction of the bus (0..1) the sensor takes at `frames_hz` camera frames per
- * second (every one a report with pose: 6 frames), `heartbeat_hz` heartbeats
- * and `command_hz` commands per second, at `bitrate` bit/s, worst-case
- * stuffing. 60 / 10 / 500 kbit/s: 0.0999. */
+ * second (every one a report with pose: kReportFrames frames), `heartbeat_hz`
+ * heartbeats and `command_hz` commands per second, at `bitrate` bit/s,
+ * worst-case stuffing. 60 / 10 / 500 kbit/s: 0.1161. */
 constexpr double worstCaseBusLoad(double frames_hz, double heartbeat_hz, double bitrate,
 				  double command_hz = 0.0)
 {
@@ -171,6 +203,10 @@ struct PoseData {
 	double rpy_deg[3]{};			/* roll, pan, tilt */
 	double sigma_t_mm[3]{};			/* 1-sigma; >= 25.5 is sent as 25.5 (saturated) */
 	double sigma_rpy_deg[3]{};		/* 1-sigma; >= 2.55 is sent as 2.55 (saturated) */
+	/* log10 of the match's number of false alarms (<= -4 when accepted, more
+	 * negative is more certain); resolution 0.1, saturates at -3276.8 and
+	 * 3276.7; NaN is sent as 3276.7 (unknown: no evidence). */
+	double log10_nfa = 0.0;
 };
 
 struct StatusData {
@@ -271,12 +307,31 @@ constexpr std::uint64_t flag(bool value, unsigned int bit)
 	return value ? std::uint64_t{ 1 } << bit : 0;
 }
 
-constexpr std::size_t slot(std::uint32_t offset)
+/* A scaled signal placed in its field: rounded, clamped to its raw range, NaN as nan_raw. */
+inline std::uint64_t put(const SignalLayout &s, double value, std::int64_t nan_raw)
 {
-	return offset == kCommand ? 7 : offset;
+	return signedField(toRaw(value, s.factor, s.rawMin(), s.rawMax(), nan_raw), s.start_bit,
+			   s.length_bits);
 }
 
-constexpr std::size_t kSlots = 8;
+/* A scaled signal's value. */
+constexpr double get(const std::array<std::uint8_t, 8> &data, const SignalLayout &s)
+{
+	const std::int64_t raw = s.is_signed ? signedBits(data, s.start_bit, s.length_bits)
+					     : static_cast<std::int64_t>(bits(data, s.start_bit, s.length_bits));
+	return static_cast<double>(raw) * s.factor;
+}
+
+/* The pose frames a valid report needs, one bit per offset. */
+constexpr std::uint8_t kPoseFrameMask = (1u << kTranslation) | (1u << kQuatA) | (1u << kQuatB) |
+					(1u << kAngles) | (1u << kSigma) | (1u << kQuality);
+
+constexpr std::size_t slot(std::uint32_t offset)
+{
+	return offset == kCommand ? 8 : offset;
+}
+
+constexpr std::size_t kSlots = 9;
 
 } /* namespace detail */
 
@@ -291,16 +346,16 @@ public:
 	explicit Encoder(std::uint32_t base_id = kDefaultBaseId) : base_id_(base_id) {}
 
 	/*
-	 * One camera frame's report: the five pose frames (when status.pose_valid,
+	 * One camera frame's report: the six pose frames (when status.pose_valid,
 	 * pose != nullptr and the pose is encodable) and then the status frame,
 	 * all with the next sequence number. Returns the number of frames written
-	 * to out: 6 with a pose, 1 without. When a pose was asked for but cannot
+	 * to out: kReportFrames (7) with a pose, 1 without. When a pose was asked for but cannot
 	 * be sent (pose == nullptr, a translation outside Tx/Ty +-3276.7 mm or
 	 * Tz 0..6553.5 mm, or a non-finite value in t, q or rpy), the status goes
 	 * out with PoseValid cleared and poseDropped() is true until the next
 	 * report. Other fields saturate at their ranges.
 	 */
-	int encodeReport(const StatusData &status, const PoseData *pose, RawFrame out[6])
+	int encodeReport(const StatusData &status, const PoseData *pose, RawFrame out[kReportFrames])
 	{
 		using namespace detail;
 		const std::uint8_t seq = sequence_;
@@ -337,6 +392,8 @@ public:
 				sigma |= signedField(toRaw(p.sigma_rpy_deg[i], kSigmaRpyRes, 0, 255, 255), 24 + 8 * i, 8);
 			}
 			out[n++] = finish(kSigma, seq, sigma);
+			out[n++] = finish(kQuality, seq,
+					  put(layout::kLog10Nfa, p.log10_nfa, layout::kLog10Nfa.rawMax()));
 		}
 
 		const std::uint64_t st =
@@ -456,7 +513,7 @@ inline const char *frameErrorName(FrameError error)
  *
  * Pose frames are held until the status frame of the same sequence arrives;
  * that status completes a Report. poseValid() is true when the status says
- * PoseValid and all five pose frames of that sequence arrived intact since
+ * PoseValid and all six pose frames of that sequence arrived intact since
  * the previous status; otherwise a PoseValid status counts in
  * incomplete_poses.
  */
@@ -492,7 +549,7 @@ public:
 		last_error_ = FrameError::None;
 
 		if (frame.id < base_id_ || frame.id > base_id_ + kCommand ||
-		    (frame.id - base_id_ > kHeartbeat && frame.id - base_id_ != kCommand)) {
+		    (frame.id - base_id_ > kQuality && frame.id - base_id_ != kCommand)) {
 			++counters_.unknown_ids;
 			last_error_ = FrameError::UnknownId;
 			return Event::None;
@@ -554,6 +611,10 @@ public:
 				pending_.sigma_rpy_deg[i] = static_cast<double>(bits(d, 24 + 8 * i, 8)) * kSigmaRpyRes;
 			}
 			return Event::None;
+		case kQuality:
+			takePose(kQuality, seq);
+			pending_.log10_nfa = get(d, layout::kLog10Nfa);
+			return Event::None;
 		case kStatus:
 			return takeStatus(d, seq);
 		case kHeartbeat:
@@ -577,7 +638,7 @@ public:
 
 	/* The last report's status, as sent (pose_valid is the sender's flag). */
 	const StatusData &status() const { return status_; }
-	/* After a Report: status().pose_valid and all five pose frames of its
+	/* After a Report: status().pose_valid and all six pose frames of its
 	 * sequence arrived intact. */
 	bool poseValid() const { return pose_valid_; }
 	/* The last valid pose (current when poseValid()). */
@@ -615,7 +676,7 @@ private:
 		status_.latency_ms = static_cast<double>(bits(d, 32, 16)) * kLatencyRes;
 		sequence_ = seq;
 
-		pose_valid_ = status_.pose_valid && pending_mask_ == 0x1f && pending_seq_ == seq;
+		pose_valid_ = status_.pose_valid && pending_mask_ == kPoseFrameMask && pending_seq_ == seq;
 		if (pose_valid_) {
 			pose_ = pending_;
 			++counters_.valid_poses;

@@ -40,6 +40,7 @@ constexpr double kTolSigmaT = 0.05 + 1e-9;
 constexpr double kTolSigmaDeg = 0.005 + 1e-9;
 constexpr double kTolRms = 0.005 + 1e-9;
 constexpr double kTolLatency = 0.005 + 1e-9;
+constexpr double kTolNfa = 0.05 + 1e-9;
 
 constexpr std::uint8_t crcOf(const char *s, std::size_t n)
 {
@@ -86,6 +87,7 @@ public:
 			p.sigma_t_mm[i] = uniform(0, 25.5);
 			p.sigma_rpy_deg[i] = uniform(0, 2.55);
 		}
+		p.log10_nfa = uniform(-300, 0);
 		return p;
 	}
 
@@ -123,6 +125,7 @@ void expectPoseNear(const PoseData &got, const PoseData &want)
 	}
 	for (int i = 0; i < 4; ++i)
 		EXPECT_NEAR(got.q[i], want.q[i], kTolQ) << "q " << i;
+	EXPECT_NEAR(got.log10_nfa, want.log10_nfa, kTolNfa);
 }
 
 void expectStatusNear(const StatusData &got, const StatusData &want)
@@ -201,11 +204,13 @@ TEST(CanProtocol, FrameLayout)
 	pose.t_mm[1] = 0.1;		/* raw 1 */
 	pose.t_mm[2] = 6553.5;		/* raw 65535 */
 	pose.frame_counter = 0x12345678;
-	RawFrame out[6];
-	ASSERT_EQ(enc.encodeReport(st, &pose, out), 6);
+	pose.log10_nfa = -12.34;	/* raw -123 = 0xff85 */
+	RawFrame out[kReportFrames];
+	ASSERT_EQ(enc.encodeReport(st, &pose, out), kReportFrames);
 
-	const std::uint32_t ids[6] = { 0x300, 0x301, 0x302, 0x303, 0x304, 0x305 };
-	for (int i = 0; i < 6; ++i) {
+	/* The pose frames, DP_Quality last, then the status. */
+	const std::uint32_t ids[kReportFrames] = { 0x300, 0x301, 0x302, 0x303, 0x304, 0x307, 0x305 };
+	for (int i = 0; i < kReportFrames; ++i) {
 		EXPECT_EQ(out[i].id, ids[i]);
 		EXPECT_EQ(out[i].len, 8);
 		EXPECT_EQ(sequenceOf(out[i]), 0u);
@@ -220,12 +225,15 @@ TEST(CanProtocol, FrameLayout)
 	/* FrameCounter in bits 16..47, little-endian */
 	EXPECT_EQ(out[2].data[2], 0x78);
 	EXPECT_EQ(out[2].data[5], 0x12);
+	/* Log10Nfa in bits 0..15, the rest of the payload spare (0) */
+	const std::array<std::uint8_t, 6> quality{ 0x85, 0xff, 0, 0, 0, 0 };
+	EXPECT_TRUE(std::equal(quality.begin(), quality.end(), out[5].data.begin()));
 	/* Status: State 2, Enabled, PoseValid: 0b00011010 */
-	EXPECT_EQ(out[5].data[0], 0x1a);
+	EXPECT_EQ(out[6].data[0], 0x1a);
 
 	/* Second report: sequence 1, alive 1 everywhere. */
-	ASSERT_EQ(enc.encodeReport(st, &pose, out), 6);
-	for (int i = 0; i < 6; ++i) {
+	ASSERT_EQ(enc.encodeReport(st, &pose, out), kReportFrames);
+	for (int i = 0; i < kReportFrames; ++i) {
 		EXPECT_EQ(sequenceOf(out[i]), 1u);
 		EXPECT_EQ(aliveOf(out[i]), 1u);
 	}
@@ -247,14 +255,14 @@ TEST(CanProtocol, RandomRoundTrip)
 		RandomReports gen(1234 + base);
 		Encoder enc(base);
 		Decoder dec(base);
-		RawFrame out[6];
+		RawFrame out[kReportFrames];
 		int valid = 0;
 		for (int i = 0; i < 2000; ++i) {
 			const bool with_pose = i % 5 != 4;
 			const PoseData pose = gen.pose();
 			const StatusData st = gen.status(with_pose);
 			const int n = enc.encodeReport(st, &pose, out);
-			ASSERT_EQ(n, with_pose ? 6 : 1);
+			ASSERT_EQ(n, with_pose ? kReportFrames : 1);
 			EXPECT_FALSE(enc.poseDropped());
 			for (int k = 0; k < n; ++k) {
 				EXPECT_EQ(sequenceOf(out[k]), static_cast<unsigned int>(i) & 0x0f);
@@ -285,7 +293,7 @@ TEST(CanProtocol, SignedFields)
 {
 	Encoder enc;
 	Decoder dec;
-	RawFrame out[6];
+	RawFrame out[kReportFrames];
 	StatusData st;
 	st.pose_valid = true;
 	const double cases[][3] = {
@@ -305,8 +313,8 @@ TEST(CanProtocol, SignedFields)
 		p.rpy_deg[0] = -180.0;
 		p.rpy_deg[1] = -0.01;
 		p.rpy_deg[2] = 327.67;
-		ASSERT_EQ(enc.encodeReport(st, &p, out), 6);
-		ASSERT_EQ(feedAll(dec, out, 6), Event::Report);
+		ASSERT_EQ(enc.encodeReport(st, &p, out), kReportFrames);
+		ASSERT_EQ(feedAll(dec, out, kReportFrames), Event::Report);
 		ASSERT_TRUE(dec.poseValid());
 		expectPoseNear(dec.pose(), p);
 		EXPECT_LT(dec.pose().q[1], 0.0);
@@ -317,7 +325,7 @@ TEST(CanProtocol, Saturation)
 {
 	Encoder enc;
 	Decoder dec;
-	RawFrame out[6];
+	RawFrame out[kReportFrames];
 	StatusData st;
 	st.pose_valid = true;
 	st.leds_used = 300;
@@ -333,9 +341,11 @@ TEST(CanProtocol, Saturation)
 	p.sigma_rpy_deg[2] = 2.55;
 	p.rpy_deg[0] = 400.0;
 	p.rpy_deg[1] = -400.0;
-	ASSERT_EQ(enc.encodeReport(st, &p, out), 6);
-	ASSERT_EQ(feedAll(dec, out, 6), Event::Report);
+	p.log10_nfa = -5000.0;
+	ASSERT_EQ(enc.encodeReport(st, &p, out), kReportFrames);
+	ASSERT_EQ(feedAll(dec, out, kReportFrames), Event::Report);
 	ASSERT_TRUE(dec.poseValid());
+	EXPECT_DOUBLE_EQ(dec.pose().log10_nfa, -3276.8);	/* at most that */
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[0], 25.5);
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[1], 25.5);	/* NaN: unknown, sent as saturated */
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[2], 0.0);
@@ -347,6 +357,20 @@ TEST(CanProtocol, Saturation)
 	EXPECT_EQ(dec.status().leds_used, 255);
 	EXPECT_DOUBLE_EQ(dec.status().rms_px, 2.55);
 	EXPECT_DOUBLE_EQ(dec.status().latency_ms, 655.35);
+
+	/* log10 NFA: NaN is unknown, sent as the top of the range (no evidence); +inf too. */
+	for (const double nfa : { std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+				  4000.0 }) {
+		p.log10_nfa = nfa;
+		ASSERT_EQ(enc.encodeReport(st, &p, out), kReportFrames);
+		ASSERT_EQ(feedAll(dec, out, kReportFrames), Event::Report);
+		ASSERT_TRUE(dec.poseValid());
+		EXPECT_DOUBLE_EQ(dec.pose().log10_nfa, 3276.7) << nfa;
+	}
+	p.log10_nfa = -std::numeric_limits<double>::infinity();
+	ASSERT_EQ(enc.encodeReport(st, &p, out), kReportFrames);
+	ASSERT_EQ(feedAll(dec, out, kReportFrames), Event::Report);
+	EXPECT_DOUBLE_EQ(dec.pose().log10_nfa, -3276.8);
 
 	st.pose_valid = false;
 	st.leds_used = -3;
@@ -388,7 +412,7 @@ TEST(CanProtocol, UnencodablePoseIsNotSentAsValid)
 	};
 	Encoder enc;
 	Decoder dec;
-	RawFrame out[6];
+	RawFrame out[kReportFrames];
 	for (const Case &c : cases) {
 		SCOPED_TRACE(c.what);
 		StatusData st;
@@ -398,7 +422,7 @@ TEST(CanProtocol, UnencodablePoseIsNotSentAsValid)
 		p.q[0] = c.qw;
 		p.rpy_deg[0] = c.roll;
 		const int n = enc.encodeReport(st, &p, out);
-		EXPECT_EQ(n, c.ok ? 6 : 1);
+		EXPECT_EQ(n, c.ok ? kReportFrames : 1);
 		EXPECT_EQ(enc.poseDropped(), !c.ok);
 		EXPECT_EQ(Encoder::poseEncodable(p), c.ok);
 		EXPECT_EQ(out[n - 1].id, kDefaultBaseId + kStatus);
@@ -417,7 +441,7 @@ TEST(CanProtocol, UnencodablePoseIsNotSentAsValid)
 	EXPECT_EQ((out[0].data[0] >> 4) & 1, 0);
 	PoseData p;
 	p.t_mm[2] = 100;
-	EXPECT_EQ(enc.encodeReport(st, &p, out), 6);
+	EXPECT_EQ(enc.encodeReport(st, &p, out), kReportFrames);
 	EXPECT_FALSE(enc.poseDropped());
 }
 
@@ -482,14 +506,14 @@ protected:
 		st_.state = SensorState::Tracking;
 		pose_.t_mm[2] = 800;
 		pose_.frame_counter = 77;
-		ASSERT_EQ(enc_.encodeReport(st_, &pose_, frames_), 6);
+		ASSERT_EQ(enc_.encodeReport(st_, &pose_, frames_), kReportFrames);
 	}
 
 	Encoder enc_;
 	Decoder dec_;
 	StatusData st_;
 	PoseData pose_;
-	RawFrame frames_[6];
+	RawFrame frames_[kReportFrames];
 };
 
 TEST_F(CanRejection, TruncatedFrame)
@@ -500,7 +524,7 @@ TEST_F(CanRejection, TruncatedFrame)
 	EXPECT_EQ(dec_.lastError(), FrameError::WrongLength);
 	EXPECT_EQ(dec_.counters().length_errors, 1u);
 	/* The rest of the report arrives: the status completes it, without a pose. */
-	EXPECT_EQ(feedAll(dec_, frames_ + 1, 5), Event::Report);
+	EXPECT_EQ(feedAll(dec_, frames_ + 1, kReportFrames - 1), Event::Report);
 	EXPECT_EQ(dec_.lastError(), FrameError::None);
 	EXPECT_FALSE(dec_.poseValid());
 	EXPECT_TRUE(dec_.status().pose_valid);
@@ -510,7 +534,7 @@ TEST_F(CanRejection, TruncatedFrame)
 
 TEST_F(CanRejection, EveryFlippedBitFailsTheCrc)
 {
-	for (int frame = 0; frame < 6; ++frame) {
+	for (int frame = 0; frame < kReportFrames; ++frame) {
 		for (int bit = 0; bit < 64; ++bit) {
 			RawFrame f = frames_[frame];
 			f.data[static_cast<std::size_t>(bit / 8)] ^= static_cast<std::uint8_t>(1u << (bit % 8));
@@ -518,16 +542,16 @@ TEST_F(CanRejection, EveryFlippedBitFailsTheCrc)
 			ASSERT_EQ(dec_.lastError(), FrameError::BadCrc);
 		}
 	}
-	EXPECT_EQ(dec_.counters().crc_errors, 6u * 64u);
+	EXPECT_EQ(dec_.counters().crc_errors, kReportFrames * 64u);
 	/* Nothing was taken from them: the intact report still decodes. */
-	EXPECT_EQ(feedAll(dec_, frames_, 6), Event::Report);
+	EXPECT_EQ(feedAll(dec_, frames_, kReportFrames), Event::Report);
 	EXPECT_TRUE(dec_.poseValid());
 	EXPECT_EQ(dec_.pose().frame_counter, 77u);
 }
 
 TEST_F(CanRejection, WrongIdWithRightDataFailsTheCrc)
 {
-	for (std::uint32_t offset : { kTranslation, kQuatA, kQuatB, kAngles, kSigma, kStatus }) {
+	for (std::uint32_t offset : { kTranslation, kQuatA, kQuatB, kAngles, kSigma, kQuality, kStatus }) {
 		RawFrame f = frames_[0];
 		if (offset == kTranslation)
 			f = frames_[1];
@@ -537,7 +561,7 @@ TEST_F(CanRejection, WrongIdWithRightDataFailsTheCrc)
 	}
 	/* The same frames from a sensor at another base on the same bus. */
 	Decoder other(0x400);
-	RawFrame f = frames_[5];
+	RawFrame f = frames_[kReportFrames - 1];
 	f.id = 0x405;
 	EXPECT_EQ(other.feed(f), Event::Rejected);
 	EXPECT_EQ(other.lastError(), FrameError::BadCrc);
@@ -545,17 +569,17 @@ TEST_F(CanRejection, WrongIdWithRightDataFailsTheCrc)
 
 TEST_F(CanRejection, RepeatedFrameIsStale)
 {
-	EXPECT_EQ(feedAll(dec_, frames_, 6), Event::Report);
+	EXPECT_EQ(feedAll(dec_, frames_, kReportFrames), Event::Report);
 	EXPECT_TRUE(dec_.poseValid());
-	EXPECT_EQ(dec_.feed(frames_[5]), Event::Rejected);
+	EXPECT_EQ(dec_.feed(frames_[kReportFrames - 1]), Event::Rejected);
 	EXPECT_EQ(dec_.lastError(), FrameError::StaleAlive);
 	EXPECT_EQ(dec_.feed(frames_[2]), Event::Rejected);
 	EXPECT_EQ(dec_.counters().stale_frames, 2u);
 	EXPECT_EQ(dec_.counters().reports, 1u);
 
 	/* A stuck sender: a new pose with the alive counters not advanced. */
-	RawFrame next[6];
-	ASSERT_EQ(enc_.encodeReport(st_, &pose_, next), 6);
+	RawFrame next[kReportFrames];
+	ASSERT_EQ(enc_.encodeReport(st_, &pose_, next), kReportFrames);
 	for (RawFrame &f : next) {
 		f.data[6] = static_cast<std::uint8_t>((f.data[6] & 0xf0) | (frames_[0].data[6] & 0x0f));
 		f.data[7] = frameCrc(f.id, f.data);
@@ -586,12 +610,12 @@ TEST_F(CanRejection, AliveGapsCountLostFrames)
 
 TEST_F(CanRejection, MissingPoseFrameMakesTheReportIncomplete)
 {
-	for (int missing = 0; missing < 5; ++missing) {
+	for (int missing = 0; missing < kReportFrames - 1; ++missing) {
 		SCOPED_TRACE(missing);
-		RawFrame report[6];
-		ASSERT_EQ(enc_.encodeReport(st_, &pose_, report), 6);
+		RawFrame report[kReportFrames];
+		ASSERT_EQ(enc_.encodeReport(st_, &pose_, report), kReportFrames);
 		Decoder dec;
-		for (int i = 0; i < 6; ++i)
+		for (int i = 0; i < kReportFrames; ++i)
 			if (i != missing)
 				dec.feed(report[i]);
 		EXPECT_EQ(dec.lastError(), FrameError::None);
@@ -607,39 +631,39 @@ TEST_F(CanRejection, PoseFramesOfAnotherSequenceDoNotComplete)
 {
 	/* Report A's status is lost, report B's QuatB is lost: A's QuatB must
 	 * not stand in for it. */
-	RawFrame b[6];
+	RawFrame b[kReportFrames];
 	PoseData other = pose_;
 	other.frame_counter = 78;
-	ASSERT_EQ(enc_.encodeReport(st_, &other, b), 6);
-	feedAll(dec_, frames_, 5);
-	for (int i : { 0, 1, 3, 4, 5 })
+	ASSERT_EQ(enc_.encodeReport(st_, &other, b), kReportFrames);
+	feedAll(dec_, frames_, kReportFrames - 1);
+	for (int i : { 0, 1, 3, 4, 5, 6 })
 		dec_.feed(b[i]);
 	EXPECT_FALSE(dec_.poseValid());
 	EXPECT_EQ(dec_.counters().incomplete_poses, 1u);
 
 	/* A status whose sequence differs from the pose frames held. */
-	RawFrame c[6], d[6];
-	ASSERT_EQ(enc_.encodeReport(st_, &pose_, c), 6);
-	ASSERT_EQ(enc_.encodeReport(st_, &pose_, d), 6);
-	feedAll(dec_, c, 5);
-	EXPECT_EQ(dec_.feed(d[5]), Event::Report);
+	RawFrame c[kReportFrames], d[kReportFrames];
+	ASSERT_EQ(enc_.encodeReport(st_, &pose_, c), kReportFrames);
+	ASSERT_EQ(enc_.encodeReport(st_, &pose_, d), kReportFrames);
+	feedAll(dec_, c, kReportFrames - 1);
+	EXPECT_EQ(dec_.feed(d[kReportFrames - 1]), Event::Report);
 	EXPECT_FALSE(dec_.poseValid());
 	EXPECT_EQ(dec_.counters().incomplete_poses, 2u);
 
 	/* The next complete report is valid again. */
-	RawFrame e[6];
-	ASSERT_EQ(enc_.encodeReport(st_, &other, e), 6);
-	EXPECT_EQ(feedAll(dec_, e, 6), Event::Report);
+	RawFrame e[kReportFrames];
+	ASSERT_EQ(enc_.encodeReport(st_, &other, e), kReportFrames);
+	EXPECT_EQ(feedAll(dec_, e, kReportFrames), Event::Report);
 	EXPECT_TRUE(dec_.poseValid());
 	EXPECT_EQ(dec_.pose().frame_counter, 78u);
 	/* Frames lost on the way, as the alive counters see them: b's QuatB (1),
-	 * c's status (1), d's five pose frames (5). */
-	EXPECT_EQ(dec_.counters().alive_gaps, 7u);
+	 * c's status (1), d's six pose frames (6). */
+	EXPECT_EQ(dec_.counters().alive_gaps, 8u);
 }
 
 TEST_F(CanRejection, OtherIdsAreNotOurs)
 {
-	for (std::uint32_t id : { kDefaultBaseId - 1, kDefaultBaseId + 7, kDefaultBaseId + 0xf,
+	for (std::uint32_t id : { kDefaultBaseId - 1, kDefaultBaseId + 8, kDefaultBaseId + 0xf,
 				  kDefaultBaseId + 0x11, 0x7ffu, 0u }) {
 		RawFrame f = frames_[0];
 		f.id = id;
@@ -653,7 +677,7 @@ TEST_F(CanRejection, OtherIdsAreNotOurs)
 	Decoder other(0x320);
 	for (const RawFrame &f : frames_)
 		EXPECT_EQ(other.feed(f), Event::None);
-	EXPECT_EQ(other.counters().unknown_ids, 6u);
+	EXPECT_EQ(other.counters().unknown_ids, static_cast<std::uint64_t>(kReportFrames));
 	EXPECT_EQ(other.counters().reports, 0u);
 }
 
@@ -665,8 +689,8 @@ TEST(CanProtocol, BusLoad)
 	EXPECT_EQ(worstCaseFrameBits(0), 34 + 13 + 8);
 	const double load = worstCaseBusLoad(60, 10, 500000);
 	EXPECT_LE(load, 0.30);
-	EXPECT_NEAR(load, (6 * 60 + 10) * 135.0 / 500000.0, 1e-12);
-	EXPECT_NEAR(load, 0.0999, 1e-4);
+	EXPECT_NEAR(load, (7 * 60 + 10) * 135.0 / 500000.0, 1e-12);
+	EXPECT_NEAR(load, 0.1161, 1e-4);
 	/* The same traffic on a 125 kbit/s bus is over the 30 % budget. */
 	EXPECT_GT(worstCaseBusLoad(60, 10, 125000), 0.30);
 }
@@ -740,6 +764,14 @@ std::string candumpLine(double t, const RawFrame &f)
 
 double clampD(double v, double lo, double hi) { return std::min(std::max(v, lo), hi); }
 
+/* What Log10Nfa carries for a value: clamped to its range, NaN as its top. */
+double sentNfa(double v)
+{
+	const SignalLayout &s = layout::kLog10Nfa;
+	const double lo = static_cast<double>(s.rawMin()) * s.factor, hi = static_cast<double>(s.rawMax()) * s.factor;
+	return std::isnan(v) ? hi : clampD(v, lo, hi);
+}
+
 class CanToolsTest : public ::testing::Test
 {
 protected:
@@ -783,10 +815,13 @@ protected:
 				r.pose.sigma_rpy_deg[2] = 9.0;
 				r.status.rms_px = 7.0;
 				r.status.latency_ms = 900.0;
+				r.pose.log10_nfa = -4000.0;
 			}
-			RawFrame out[6];
+			if (i % 10 == 8)
+				r.pose.log10_nfa = std::numeric_limits<double>::quiet_NaN();
+			RawFrame out[kReportFrames];
 			const int k = enc.encodeReport(r.status, &r.pose, out);
-			ASSERT_EQ(k, r.with_pose ? 6 : 1);
+			ASSERT_EQ(k, r.with_pose ? kReportFrames : 1);
 			for (int j = 0; j < k; ++j) {
 				log << candumpLine(t + 0.0001 * j, out[j]);
 				frames_.push_back(out[j]);
@@ -887,6 +922,11 @@ protected:
 				}
 				break;
 			}
+			case kQuality:
+				ASSERT_EQ(msg, "DP_Quality");
+				EXPECT_NEAR(val("Log10Nfa"), sentNfa(p.log10_nfa), kTolNfa);
+				EXPECT_EQ(sequenceOf(f), report & 0x0f);
+				break;
 			case kStatus: {
 				ASSERT_EQ(msg, "DP_Status");
 				const StatusData &st = r_in.status;
@@ -965,6 +1005,7 @@ protected:
 			EXPECT_EQ(o["faults"].get<std::vector<std::string>>(), faults);
 			if (!in.with_pose) {
 				EXPECT_TRUE(o["t_mm"].is_null());
+				EXPECT_TRUE(o["log10_nfa"].is_null());
 				EXPECT_TRUE(o["frame"].is_null());
 				continue;
 			}
@@ -979,6 +1020,7 @@ protected:
 			}
 			for (std::size_t k = 0; k < 4; ++k)
 				EXPECT_NEAR(o["q"][k].get<double>(), p.q[k], kTolQ);
+			EXPECT_NEAR(o["log10_nfa"].get<double>(), sentNfa(p.log10_nfa), kTolNfa);
 			if (::testing::Test::HasFailure())
 				return;
 		}
@@ -1002,6 +1044,46 @@ TEST_F(CanToolsTest, CanmatrixAndCandecodeAgreeWithTheEncoder)
 	ASSERT_FALSE(HasFatalFailure());
 	checkCanmatrix(kDefaultBaseId);
 	checkCandecode(kDefaultBaseId);
+}
+
+/* Every SignalLayout of the header is its SG_ line in the DBC, in the message of its offset. */
+TEST(CanProtocol, SignalLayoutsAreTheDbcs)
+{
+	const std::string dbc_path = std::string(DOCKPOSE_SOURCE_DIR) + "/firmware/protocol/dockpose.dbc";
+	const std::string dbc = readFile(dbc_path);
+	struct Named {
+		const char *name;
+		const SignalLayout &layout;
+	};
+	const Named layouts[] = { { "Log10Nfa", layout::kLog10Nfa } };
+	for (const Named &n : layouts) {
+		SCOPED_TRACE(n.name);
+		/* The message that holds the signal: the last BO_ before its SG_ line. */
+		const std::size_t at = dbc.find(std::string(" SG_ ") + n.name + " :");
+		ASSERT_NE(at, std::string::npos) << "no SG_ " << n.name << " in " << dbc_path;
+		const std::size_t bo = dbc.rfind("BO_ ", at);
+		ASSERT_NE(bo, std::string::npos);
+		unsigned int id = 0;
+		ASSERT_EQ(std::sscanf(dbc.c_str() + bo, "BO_ %u", &id), 1);
+		EXPECT_EQ(id, kDbcBaseId + n.layout.offset);
+		unsigned int start = 0, length = 0;
+		char sign = 0;
+		double factor = 0, offset = 1, lo = 0, hi = 0;
+		const std::string line = dbc.substr(at, dbc.find('\n', at) - at);
+		ASSERT_EQ(std::sscanf(line.c_str() + line.find(':') + 1, " %u|%u@1%c (%lf,%lf) [%lf|%lf]", &start, &length,
+				      &sign, &factor, &offset, &lo, &hi),
+			  7)
+			<< line;
+		EXPECT_EQ(start, n.layout.start_bit);
+		EXPECT_EQ(length, n.layout.length_bits);
+		EXPECT_EQ(sign == '-', n.layout.is_signed);
+		EXPECT_DOUBLE_EQ(factor, n.layout.factor);
+		EXPECT_EQ(offset, 0.0);
+		EXPECT_NEAR(lo, static_cast<double>(n.layout.rawMin()) * n.layout.factor, 1e-9);
+		EXPECT_NEAR(hi, static_cast<double>(n.layout.rawMax()) * n.layout.factor, 1e-9);
+		/* Clear of bytes 6 and 7 (AliveCounter, Sequence, CRC). */
+		EXPECT_LE(start + length, 48u);
+	}
 }
 
 TEST_F(CanToolsTest, OtherBaseIdIsRemapped)
