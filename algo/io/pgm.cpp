@@ -1,6 +1,11 @@
 /* SPDX-License-Identifier: MIT */
 #include "algo/io/pgm.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -11,6 +16,9 @@
 namespace dockpose {
 
 namespace {
+
+/* What PgmReader allows beyond the pixels for the header (comments included) and trailing bytes. */
+constexpr std::size_t kHeaderRoom = 4096;
 
 bool isSpace(char c)
 {
@@ -60,79 +68,143 @@ std::string readField(std::string_view s, std::size_t *pos, const char *what, lo
 
 } /* namespace */
 
-LoadResult<Image> parsePgm(std::string_view bytes, const std::string &source)
+std::string viewPgm(std::string_view bytes, const std::string &source, ImageView *view)
 {
-	LoadResult<Image> r;
-	if (bytes.size() < 2 || bytes[0] != 'P') {
-		r.error = source + ": not a PGM file (it does not start with \"P5\")";
-		return r;
-	}
-	if (bytes[1] == '2') {
-		r.error = source + ": ASCII PGM (P2) is not supported; convert it to binary P5";
-		return r;
-	}
-	if (bytes[1] != '5') {
-		r.error = source + ": Netpbm type P" + bytes[1] +
-			  " is not a binary graymap; dockpose reads P5 only";
-		return r;
-	}
+	if (bytes.size() < 2 || bytes[0] != 'P')
+		return source + ": not a PGM file (it does not start with \"P5\")";
+	if (bytes[1] == '2')
+		return source + ": ASCII PGM (P2) is not supported; convert it to binary P5";
+	if (bytes[1] != '5')
+		return source + ": Netpbm type P" + bytes[1] +
+		       " is not a binary graymap; dockpose reads P5 only";
 	std::size_t pos = 2;
-	if (pos < bytes.size() && !isSpace(bytes[pos]) && bytes[pos] != '#') {
-		r.error = source + ": malformed PGM header (no whitespace after \"P5\")";
-		return r;
-	}
+	if (pos < bytes.size() && !isSpace(bytes[pos]) && bytes[pos] != '#')
+		return source + ": malformed PGM header (no whitespace after \"P5\")";
 
 	long width = 0, height = 0, maxval = 0;
 	std::string err;
 	if (!(err = readField(bytes, &pos, "width", &width)).empty() ||
 	    !(err = readField(bytes, &pos, "height", &height)).empty() ||
-	    !(err = readField(bytes, &pos, "maxval", &maxval)).empty()) {
-		r.error = source + ": malformed PGM header: " + err;
-		return r;
-	}
-	if (width <= 0 || height <= 0 || width > kMaxFrameSide || height > kMaxFrameSide) {
-		r.error = source + ": PGM size " + std::to_string(width) + "x" +
-			  std::to_string(height) + " is not a frame size (1.." +
-			  std::to_string(kMaxFrameSide) + " pixels per side)";
-		return r;
-	}
-	if (maxval > 255) {
-		r.error = source + ": 16-bit PGM (maxval " + std::to_string(maxval) +
-			  ") is not supported; dockpose needs 8-bit frames";
-		return r;
-	}
-	if (maxval < 1) {
-		r.error = source + ": PGM maxval 0 is invalid (1..255 expected)";
-		return r;
-	}
+	    !(err = readField(bytes, &pos, "maxval", &maxval)).empty())
+		return source + ": malformed PGM header: " + err;
+	if (width <= 0 || height <= 0 || width > kMaxFrameSide || height > kMaxFrameSide)
+		return source + ": PGM size " + std::to_string(width) + "x" +
+		       std::to_string(height) + " is not a frame size (1.." +
+		       std::to_string(kMaxFrameSide) + " pixels per side)";
+	if (maxval > 255)
+		return source + ": 16-bit PGM (maxval " + std::to_string(maxval) +
+		       ") is not supported; dockpose needs 8-bit frames";
+	if (maxval < 1)
+		return source + ": PGM maxval 0 is invalid (1..255 expected)";
 	/* Exactly one whitespace byte separates the header from the pixels. */
-	if (pos >= bytes.size() || !isSpace(bytes[pos])) {
-		r.error = source + ": truncated PGM (no pixel data after the header)";
-		return r;
-	}
+	if (pos >= bytes.size() || !isSpace(bytes[pos]))
+		return source + ": truncated PGM (no pixel data after the header)";
 	++pos;
 
 	const std::size_t need = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
 	const std::size_t have = bytes.size() - pos;
-	if (have < need) {
-		r.error = source + ": truncated PGM: " + std::to_string(width) + "x" +
-			  std::to_string(height) + " needs " + std::to_string(need) +
-			  " bytes of pixel data, the file has " + std::to_string(have);
+	if (have < need)
+		return source + ": truncated PGM: " + std::to_string(width) + "x" +
+		       std::to_string(height) + " needs " + std::to_string(need) +
+		       " bytes of pixel data, the file has " + std::to_string(have);
+	view->data = reinterpret_cast<const std::uint8_t *>(bytes.data() + pos);
+	view->width = static_cast<int>(width);
+	view->height = static_cast<int>(height);
+	view->stride_bytes = static_cast<int>(width);
+	return {};
+}
+
+LoadResult<Image> parsePgm(std::string_view bytes, const std::string &source)
+{
+	LoadResult<Image> r;
+	ImageView view;
+	r.error = viewPgm(bytes, source, &view);
+	if (!r.ok())
 		return r;
-	}
-	r.value = Image(static_cast<int>(width), static_cast<int>(height));
-	std::memcpy(r.value.data(), bytes.data() + pos, need);
+	r.value = Image(view.width, view.height);
+	std::memcpy(r.value.data(), view.data,
+		    static_cast<std::size_t>(view.width) * static_cast<std::size_t>(view.height));
 	return r;
 }
 
 LoadResult<Image> readPgm(const std::string &path)
 {
-	std::string bytes;
+	PgmReader reader;
 	LoadResult<Image> r;
-	r.error = readFileContents(path, &bytes);
+	ImageView view;
+	r.error = reader.read(path, &view);
 	if (!r.ok())
 		return r;
-	return parsePgm(bytes, path);
+	r.value = Image(view.width, view.height);
+	std::memcpy(r.value.data(), view.data,
+		    static_cast<std::size_t>(view.width) * static_cast<std::size_t>(view.height));
+	return r;
+}
+
+PgmReader::PgmReader(int width, int height)
+{
+	if (width > 0 && height > 0)
+		grow(static_cast<std::size_t>(width) * static_cast<std::size_t>(height) +
+		     kHeaderRoom);
+}
+
+void PgmReader::grow(std::size_t bytes)
+{
+	/* new[] without (): the buffer is not zeroed, read(2) fills what is used. */
+	buffer_.reset(new std::uint8_t[bytes]);
+	capacity_ = bytes;
+}
+
+std::string PgmReader::read(const std::string &path, ImageView *view)
+{
+	const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+	if (fd < 0) {
+		const int err = errno;
+		return path + ": cannot open (" + (err ? std::strerror(err) : "unknown error") +
+		       ")";
+	}
+	struct stat st;
+	if (::fstat(fd, &st) != 0) {
+		::close(fd);
+		return path + ": read error";
+	}
+	if (S_ISDIR(st.st_mode)) {
+		::close(fd);
+		return path + ": is a directory, not a file";
+	}
+
+	/*
+	 * A regular file: read exactly its size, no read(2) to see the end. A
+	 * pipe or device: read to the end, growing the buffer as needed.
+	 */
+	const bool regular = S_ISREG(st.st_mode);
+	std::size_t want = regular ? static_cast<std::size_t>(st.st_size) : capacity_;
+	if (want > capacity_ || capacity_ == 0)
+		grow(std::max<std::size_t>(want, kHeaderRoom));
+	std::size_t have = 0;
+	for (;;) {
+		if (!regular && have == capacity_) {
+			std::unique_ptr<std::uint8_t[]> old = std::move(buffer_);
+			grow(2 * capacity_);
+			std::memcpy(buffer_.get(), old.get(), have);
+			want = capacity_;
+		}
+		if (have == want)
+			break;
+		const ssize_t n = ::read(fd, buffer_.get() + have, want - have);
+		if (n < 0 && errno == EINTR)
+			continue;
+		if (n < 0) {
+			::close(fd);
+			return path + ": read error";
+		}
+		if (n == 0)
+			break;
+		have += static_cast<std::size_t>(n);
+	}
+	::close(fd);
+	return viewPgm(std::string_view(reinterpret_cast<const char *>(buffer_.get()), have), path,
+		       view);
 }
 
 std::string encodePgm(const ImageView &image)
