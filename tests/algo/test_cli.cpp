@@ -2,8 +2,10 @@
 /*
  * The host tool, run as a program: `dockpose render` frames with known truth,
  * `dockpose solve` them, and compare; and the error contract of `solve`
- * (exit codes 0/1/2, one JSON line per image in input order, the exact fields);
- * and the annotated frames of `solve --annotate`, read back as PPM files.
+ * (exit codes 0/1/2, one JSON line per image in input order, the exact fields,
+ * strings escaped byte for byte as nlohmann::json escapes them); the tool's
+ * reused line buffer (tools/dockpose/json_line.h); and the annotated frames of
+ * `solve --annotate`, read back as PPM files.
  */
 #include <sys/wait.h>
 #include <unistd.h>
@@ -17,6 +19,7 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <set>
 #include <sstream>
 #include <string>
@@ -26,6 +29,119 @@
 #include <nlohmann/json.hpp>
 
 #include "algo/pose.h"
+#include "tools/dockpose/json_line.h"
+
+/* The counting hooks interpose malloc, which the sanitizers' allocator does not allow. */
+#if !defined(__SANITIZE_ADDRESS__)
+#define DOCKPOSE_COUNT_ALLOCATIONS 1
+#include "../common/counting_allocator.h"
+#endif
+
+namespace {
+
+std::string nlohmannDump(const std::string &text)
+{
+	return nlohmann::json(text).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
+} /* namespace */
+
+/* The tool's strings are nlohmann's, byte for byte: every single byte, and random mixes of ASCII,
+ * control characters, good and broken UTF-8. */
+TEST(JsonLine, EscapesStringsLikeNlohmann)
+{
+	using dockpose::tool::JsonLine;
+	JsonLine line;
+	for (int b = 0; b < 256; ++b) {
+		const std::string text(1, static_cast<char>(b));
+		line.clear();
+		line.string(text);
+		EXPECT_EQ(line.str(), nlohmannDump(text)) << "byte " << b;
+	}
+	const std::vector<std::string> pieces = {
+		"a",
+		"Z",
+		" ",
+		"/",
+		"\\",
+		"\"",
+		"\x7f",
+		"\n",
+		"\t",
+		"\x01",
+		"\x1f",
+		"\xc3\xa9" /* é */,
+		"\xe2\x82\xac" /* € */,
+		"\xf0\x9f\x98\x80" /* U+1F600 */,
+		"\xc3" /* cut short */,
+		"\xc0\xaf" /* overlong */,
+		"\xed\xa0\x80" /* surrogate */,
+		"\xf4\x90\x80\x80" /* > U+10FFFF */,
+		"\xe0\x80\x80",
+		"\xff",
+		"\x80",
+		"\xef\xbf\xbd",
+	};
+	std::mt19937 rng(7);
+	for (int i = 0; i < 3000; ++i) {
+		std::string text;
+		const int n = static_cast<int>(rng() % 8);
+		for (int k = 0; k < n; ++k)
+			text += pieces[rng() % pieces.size()];
+		line.clear();
+		line.string(text);
+		ASSERT_EQ(line.str(), nlohmannDump(text)) << nlohmann::json(text).dump(
+			-1, ' ', true, nlohmann::json::error_handler_t::replace);
+	}
+	EXPECT_TRUE(JsonLine::validUtf8("plain \xc3\xa9 \xf0\x9f\x98\x80"));
+	EXPECT_FALSE(JsonLine::validUtf8("\xed\xa0\x80"));
+}
+
+TEST(JsonLine, NumbersAsTheToolPrintsThem)
+{
+	dockpose::tool::JsonLine line;
+	const double v[3] = { -0.00001, 1.23456, std::nan("") };
+	line.numbers(v, 3, "%.4f")
+		.raw(" ")
+		.integer(-42)
+		.raw(" ")
+		.integer(4294967295LL)
+		.raw(" ")
+		.boolean(true);
+	line.raw(" ").number(-12.34, "%.1f").raw(" ").number(-HUGE_VAL, "%.1f");
+	EXPECT_EQ(line.str(), "[0.0000, 1.2346, null] -42 4294967295 true -12.3 null");
+}
+
+#ifdef DOCKPOSE_COUNT_ALLOCATIONS
+/* A line buffer that has held a line allocates nothing for the next ones. */
+TEST(JsonLine, ReusedLineAllocatesNothing)
+{
+	dockpose::tool::JsonLine line;
+	const std::string path = "/tmp/frames/frame_0001 \"quoted\" \xc3\xa9.pgm";
+	const double cov[6] = { 1e-3, -2e-5, 3.5, 0, 1e300, -7 };
+	auto build = [&] {
+		line.clear();
+		line.raw("{\"image\": ").string(path).raw(", \"found\": ").boolean(true);
+		for (int i = 0; i < 6; ++i)
+			line.raw(", ").numbers(cov, 6, "%.6g");
+		line.raw(", \"leds\": ").integer(6).raw("}");
+	};
+	build();
+	const std::string first = line.str();
+	dockpose::test::armAllocationCounter();
+	for (int i = 0; i < 100; ++i)
+		build();
+	const long allocations = dockpose::test::disarmAllocationCounter();
+	EXPECT_EQ(allocations, 0);
+	EXPECT_EQ(line.str(), first);
+
+	/* The hooks do count: a fresh line allocates its buffer. */
+	dockpose::test::armAllocationCounter();
+	dockpose::tool::JsonLine fresh;
+	fresh.raw("x");
+	EXPECT_GT(dockpose::test::disarmAllocationCounter(), 0);
+}
+#endif
 
 #ifndef DOCKPOSE_TOOL
 
@@ -141,10 +257,10 @@ std::set<std::string> keys(const json &j)
 	return k;
 }
 
-const std::set<std::string> kFoundKeys = { "image",	    "found",	 "status",  "blobs",
-					   "t_mm",	    "q_wxyz",	 "rpy_deg", "rms_px",
-					   "leds",	    "led_mask",	 "tracked", "sigma_t_mm",
-					   "sigma_rpy_deg", "covariance" };
+const std::set<std::string> kFoundKeys = { "image",	 "found",	  "status",    "blobs",
+					   "t_mm",	 "q_wxyz",	  "rpy_deg",   "rms_px",
+					   "log10_nfa",	 "leds",	  "led_mask",  "tracked",
+					   "sigma_t_mm", "sigma_rpy_deg", "covariance" };
 const std::set<std::string> kNotFoundKeys = { "image", "found", "status", "blobs" };
 const std::set<std::string> kErrorKeys = { "image", "found", "error" };
 
@@ -195,6 +311,11 @@ void checkFound(const json &line, const json &truth, const std::string &image, d
 	EXPECT_GE(line.at("blobs").get<int>(), std::popcount(visible));
 	EXPECT_LT(line.at("rms_px").get<double>(), 0.5);
 	EXPECT_GE(line.at("rms_px").get<double>(), 0.0);
+	/* log10 NFA: a number with one decimal, never above 1 false alarm for a found pose. */
+	ASSERT_TRUE(line.at("log10_nfa").is_number()) << line.at("log10_nfa");
+	const double nfa = line.at("log10_nfa").get<double>();
+	EXPECT_LE(nfa, 0.0);
+	EXPECT_NEAR(nfa * 10.0, std::round(nfa * 10.0), 1e-6);
 
 	const json &cov = line.at("covariance");
 	ASSERT_EQ(cov.size(), 6u);
@@ -523,6 +644,55 @@ TEST_F(Cli, UnreadableImagesAreReportedAndTheRestSolved)
 
 	/* Only good images: exit code 0. */
 	EXPECT_EQ(run("solve -t " + target + " -c " + camera + " " + good1).code, 0);
+}
+
+/* Paths with quotes, backslashes, control characters, UTF-8 and broken UTF-8: each line starts with
+ * the path as nlohmann::json writes it, found or not. */
+TEST_F(Cli, ImagePathsAreEscapedLikeNlohmann)
+{
+	const std::string target = kData + "/wedge.json", camera = kData + "/cam512.json";
+	const std::string out = path("frames");
+	ASSERT_EQ(run("render -t " + target + " -c " + camera + " --range-mm 900 -o " + out).code,
+		  0);
+	const std::string frame = out + "/frame_0000.pgm";
+	const std::vector<std::string> names = {
+		"plain.pgm",
+		"quote\"and\\backslash.pgm",
+		"tab\tnewline\nctl\x01.pgm",
+		"caf\xc3\xa9 \xe2\x82\xac.pgm",
+		"broken\xff\xc3.pgm",
+	};
+	std::string args;
+	std::vector<std::string> paths;
+	for (const std::string &name : names) {
+		paths.push_back(path(name));
+		fs::copy_file(frame, paths.back());
+		args += " '" + paths.back() + "'";
+	}
+	paths.push_back(path("missing \"\x02.pgm"));
+	args += " '" + paths.back() + "'";
+
+	const ToolRun s = run("solve -t " + target + " -c " + camera + args, false);
+	EXPECT_EQ(s.code, 1) << s.err; /* the missing one */
+	std::vector<std::string> lines;
+	std::stringstream ss(s.out);
+	for (std::string line; std::getline(ss, line);)
+		lines.push_back(line);
+	ASSERT_EQ(lines.size(), paths.size()) << s.out;
+	for (std::size_t i = 0; i < paths.size(); ++i) {
+		SCOPED_TRACE(lines[i]);
+		const std::string head = "{\"image\": " + nlohmannDump(paths[i]) + ", \"found\": ";
+		EXPECT_EQ(lines[i].substr(0, head.size()), head);
+		const json j = json::parse(lines[i]);
+		if (i + 1 < paths.size()) {
+			EXPECT_EQ(j.at("found"), true);
+		} else {
+			const std::string error =
+				paths[i] + ": cannot open (No such file or directory)";
+			EXPECT_EQ(lines[i],
+				  head + "false, \"error\": " + nlohmannDump(error) + "}");
+		}
+	}
 }
 
 TEST_F(Cli, BadModelOrCameraFileIsExitCode2)

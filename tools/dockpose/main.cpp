@@ -8,9 +8,10 @@
  *       tools parse):
  *         {"image": <path as given>, "found": bool, "status": "...", "blobs": n,
  *          "t_mm": [x, y, z], "q_wxyz": [w, x, y, z], "rpy_deg": [roll, pan, tilt],
- *          "rms_px": r, "leds": n, "led_mask": m, "tracked": bool,
+ *          "rms_px": r, "log10_nfa": l, "leds": n, "led_mask": m, "tracked": bool,
  *          "sigma_t_mm": [..], "sigma_rpy_deg": [..], "covariance": [[6 x 6]]}
- *       (pose fields only when found). An image that cannot be read, or whose
+ *       (pose fields only when found; log10_nfa: log10 of the number of false
+ *       alarms of the match, one decimal, <= -4 for an accepted pose). An image that cannot be read, or whose
  *       size is not the camera's, gives {"image": .., "found": false, "error": ".."}
  *       and a message on stderr. Exit code: 0 all images read, 1 some image
  *       could not be read (or its annotation not written), 2 bad arguments or a
@@ -45,44 +46,16 @@
 #include "algo/pose.h"
 #include "algo/synth/renderer.h"
 #include "tools/dockpose/annotate.h"
+#include "tools/dockpose/json_line.h"
 
 namespace {
 
 using namespace dockpose;
+using dockpose::tool::JsonLine;
 
 constexpr int kExitOk = 0;
 constexpr int kExitImageFailed = 1;
 constexpr int kExitUsage = 2;
-
-/* A number for JSON: printf format, or null when not finite. */
-std::string num(double v, const char *format)
-{
-	if (!std::isfinite(v))
-		return "null";
-	char buf[64];
-	std::snprintf(buf, sizeof(buf), format, v);
-	/* No "-0.0000": a negative number that prints as zero is zero. */
-	if (buf[0] == '-' && std::strspn(buf + 1, "0.") == std::strlen(buf + 1))
-		return buf + 1;
-	return buf;
-}
-
-template<typename Vec>
-std::string numArray(const Vec &v, int n, const char *format)
-{
-	std::string s = "[";
-	for (int i = 0; i < n; ++i) {
-		if (i)
-			s += ", ";
-		s += num(v[i], format);
-	}
-	return s + "]";
-}
-
-std::string jsonString(const std::string &s)
-{
-	return nlohmann::json(s).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-}
 
 /* "a,b,c,..." -> exactly n finite numbers, else an error sentence. */
 std::string parseNumbers(const std::string &text, std::size_t n, const char *what,
@@ -130,35 +103,29 @@ bool loadFiles(const std::string &target_path, const std::string &camera_path, F
 	return true;
 }
 
-std::string poseJson(const PoseResult &r)
+/* The pose fields of a found line, appended to *out. Allocates: never (see JsonLine). */
+void poseJson(const PoseResult &r, JsonLine *out)
 {
-	std::string s;
-	s += ", \"t_mm\": " + numArray(r.t_mm, 3, "%.4f");
+	out->raw(", \"t_mm\": ").numbers(r.t_mm, 3, "%.4f");
 	const double q[4] = { r.q.w(), r.q.x(), r.q.y(), r.q.z() };
-	s += ", \"q_wxyz\": " + numArray(q, 4, "%.9f");
-	s += ", \"rpy_deg\": " + numArray(r.rpy_deg, 3, "%.5f");
-	s += ", \"rms_px\": " + num(r.rms_px, "%.4f");
-	s += ", \"leds\": " + std::to_string(r.leds_used);
-	s += ", \"led_mask\": " + std::to_string(r.led_mask);
-	s += std::string(", \"tracked\": ") + (r.tracked ? "true" : "false");
-	s += ", \"sigma_t_mm\": " + numArray(r.sigma_t_mm, 3, "%.6g");
-	s += ", \"sigma_rpy_deg\": " + numArray(r.sigma_rpy_deg, 3, "%.6g");
-	s += ", \"covariance\": [";
+	out->raw(", \"q_wxyz\": ").numbers(q, 4, "%.9f");
+	out->raw(", \"rpy_deg\": ").numbers(r.rpy_deg, 3, "%.5f");
+	out->raw(", \"rms_px\": ").number(r.rms_px, "%.4f");
+	out->raw(", \"log10_nfa\": ").number(r.log10_nfa, "%.1f");
+	out->raw(", \"leds\": ").integer(r.leds_used);
+	out->raw(", \"led_mask\": ").integer(r.led_mask);
+	out->raw(", \"tracked\": ").boolean(r.tracked);
+	out->raw(", \"sigma_t_mm\": ").numbers(r.sigma_t_mm, 3, "%.6g");
+	out->raw(", \"sigma_rpy_deg\": ").numbers(r.sigma_rpy_deg, 3, "%.6g");
+	out->raw(", \"covariance\": [");
 	for (int i = 0; i < 6; ++i) {
 		if (i)
-			s += ", ";
+			out->raw(", ");
 		const double row[6] = { r.covariance(i, 0), r.covariance(i, 1), r.covariance(i, 2),
 					r.covariance(i, 3), r.covariance(i, 4), r.covariance(i, 5) };
-		s += numArray(row, 6, "%.6g");
+		out->numbers(row, 6, "%.6g");
 	}
-	return s + "]";
-}
-
-void printLine(const std::string &line)
-{
-	std::fputs(line.c_str(), stdout);
-	std::fputc('\n', stdout);
-	std::fflush(stdout);
+	out->raw("]");
 }
 
 struct SolveArgs {
@@ -204,38 +171,47 @@ int runSolve(const SolveArgs &args)
 	}
 	const annotate::Style style = annotate::Style::fromWidth(files.camera.width);
 
+	/*
+	 * The frame loop allocates nothing after its first frame: every frame is
+	 * read into the reader's one buffer (sized for the camera) and solved
+	 * where it lies, every line is built in one reused buffer. Only errors
+	 * and --annotate allocate.
+	 */
 	Pipeline pipeline(files.target, files.camera, config);
+	PgmReader reader(files.camera.width, files.camera.height);
+	JsonLine line;
 	int exit_code = kExitOk;
 	for (const std::string &path : args.images) {
-		const std::string head = "{\"image\": " + jsonString(path);
-		auto image = readPgm(path);
-		std::string error = image.error;
-		if (error.empty() && (image.value.width() != files.camera.width ||
-				      image.value.height() != files.camera.height))
-			error = path + ": the image is " + std::to_string(image.value.width()) +
-				"x" + std::to_string(image.value.height()) + ", the camera " +
-				args.camera + " is " + std::to_string(files.camera.width) + "x" +
+		line.clear();
+		line.raw("{\"image\": ").string(path);
+		ImageView frame;
+		std::string error = reader.read(path, &frame);
+		if (error.empty() &&
+		    (frame.width != files.camera.width || frame.height != files.camera.height))
+			error = path + ": the image is " + std::to_string(frame.width) + "x" +
+				std::to_string(frame.height) + ", the camera " + args.camera +
+				" is " + std::to_string(files.camera.width) + "x" +
 				std::to_string(files.camera.height);
 		if (!error.empty()) {
 			std::cerr << "dockpose solve: " << error << "\n";
-			printLine(head + ", \"found\": false, \"error\": " + jsonString(error) +
-				  "}");
+			line.raw(", \"found\": false, \"error\": ").string(error).raw("}");
+			line.writeTo(stdout);
 			exit_code = kExitImageFailed;
 			continue;
 		}
 		if (!args.track)
 			pipeline.reset();
-		const PoseResult &r = pipeline.process(image.value.view());
-		std::string line = head + ", \"found\": " + (r.found ? "true" : "false") +
-				   ", \"status\": " + jsonString(poseStatusName(r.status)) +
-				   ", \"blobs\": " + std::to_string(r.blobs);
+		const PoseResult &r = pipeline.process(frame);
+		line.raw(", \"found\": ").boolean(r.found);
+		line.raw(", \"status\": ").string(poseStatusName(r.status));
+		line.raw(", \"blobs\": ").integer(r.blobs);
 		if (r.found)
-			line += poseJson(r);
-		printLine(line + "}");
+			poseJson(r, &line);
+		line.raw("}");
+		line.writeTo(stdout);
 
 		if (!args.annotate_dir.empty()) {
-			annotate::RgbImage picture =
-				annotate::RgbImage::fromGrey(image.value.view());
+			annotate::RgbImage picture = annotate::RgbImage::fromGrey(frame);
 			annotate::annotateFrame(&picture, pipeline.camera(), pipeline.target(),
 						pipeline.blobs(), r, style);
 			const std::filesystem::path out =
@@ -315,6 +291,7 @@ int runRender(const RenderArgs &args)
 	FrameRenderer renderer(files.target, files.camera);
 	Image frame(files.camera.width, files.camera.height);
 	RenderTruth truth;
+	JsonLine line;
 	int index = 0;
 	for (const Pose &pose : poses) {
 		for (int c = 0; c < args.count; ++c, ++index) {
@@ -329,24 +306,27 @@ int runRender(const RenderArgs &args)
 			}
 			const Eigen::Quaterniond q = quaternionFromRotation(pose.R);
 			const double qv[4] = { q.w(), q.x(), q.y(), q.z() };
-			std::string line = "{\"file\": " + jsonString(name) +
-					   ", \"seed\": " + std::to_string(seed);
-			line += ", \"t_mm\": " + numArray(pose.t_mm, 3, "%.6f");
-			line += ", \"q_wxyz\": " + numArray(qv, 4, "%.12f");
-			line += ", \"rpy_deg\": " +
-				numArray(rollPanTiltDegFromRotation(pose.R), 3, "%.8f");
-			line += ", \"visible_mask\": " + std::to_string(truth.visible_mask);
-			line += ", \"occluded_mask\": " + std::to_string(truth.occluded_mask);
-			line += ", \"clutter_blobs\": " + std::to_string(truth.clutter_blobs);
-			line += ", \"led_px\": [";
+			line.clear();
+			line.raw("{\"file\": ").string(name);
+			line.raw(", \"seed\": ").integer(static_cast<std::int64_t>(seed));
+			line.raw(", \"t_mm\": ").numbers(pose.t_mm, 3, "%.6f");
+			line.raw(", \"q_wxyz\": ").numbers(qv, 4, "%.12f");
+			line.raw(", \"rpy_deg\": ")
+				.numbers(rollPanTiltDegFromRotation(pose.R), 3, "%.8f");
+			line.raw(", \"visible_mask\": ").integer(truth.visible_mask);
+			line.raw(", \"occluded_mask\": ").integer(truth.occluded_mask);
+			line.raw(", \"clutter_blobs\": ").integer(truth.clutter_blobs);
+			line.raw(", \"led_px\": [");
 			for (std::size_t i = 0; i < truth.led_px.size(); ++i) {
 				if (i)
-					line += ", ";
-				line += truth.led_px[i].allFinite()
-						? numArray(truth.led_px[i], 2, "%.5f")
-						: "null";
+					line.raw(", ");
+				if (truth.led_px[i].allFinite())
+					line.numbers(truth.led_px[i], 2, "%.5f");
+				else
+					line.raw("null");
 			}
-			truth_file << line << "]}\n";
+			line.raw("]}");
+			truth_file << line.str() << "\n";
 		}
 	}
 	truth_file.close();
