@@ -11,11 +11,12 @@
  *          "rms_px": r, "log10_nfa": l, "leds": n, "led_mask": m, "tracked": bool,
  *          "sigma_t_mm": [..], "sigma_rpy_deg": [..], "covariance": [[6 x 6]]}
  *       (pose fields only when found; log10_nfa: log10 of the number of false
- *       alarms of the match, one decimal, <= -4 for an accepted pose). An image that cannot be read, or whose
- *       size is not the camera's, gives {"image": .., "found": false, "error": ".."}
- *       and a message on stderr. Exit code: 0 all images read, 1 some image
- *       could not be read (or its annotation not written), 2 bad arguments or a
- *       bad target/camera file or an annotation directory that cannot be made.
+ *       alarms of the match, one decimal, <= -4 for an accepted pose). An
+ *       image that cannot be read, or whose size is not the camera's, gives
+ *       {"image": .., "found": false, "error": ".."} and a message on stderr.
+ *       Exit code: 0 all images read, 1 some image could not be read (or its
+ *       annotation not written), 2 bad arguments or a bad target/camera file
+ *       or an annotation directory that cannot be made.
  *       --annotate DIR also writes DIR/<image stem>.ppm per image read (see
  *       annotate.h); it changes nothing in the JSON lines.
  *
