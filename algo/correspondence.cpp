@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 
 #include <Eigen/Geometry>
@@ -54,6 +56,30 @@ bool convexOrder(const Eigen::Vector2d *p, const int idx[4], int order[4])
 	return true;
 }
 
+/*
+ * Where the diagonals p0-p2 and p1-p3 of a quadrilateral cross: p0 + s (p2 -
+ * p0) = p1 + t (p3 - p1). False when they are parallel.
+ */
+bool diagonalCross(const Eigen::Vector2d &p0, const Eigen::Vector2d &p1, const Eigen::Vector2d &p2,
+		   const Eigen::Vector2d &p3, double *s, double *t)
+{
+	const Eigen::Vector2d d0 = p2 - p0, d1 = p3 - p1, w = p1 - p0;
+	const double den = cross2(d0, d1);
+	if (!(std::abs(den) > 1e-300))
+		return false;
+	*s = cross2(w, d1) / den;
+	*t = cross2(w, d0) / den;
+	return true;
+}
+
+/* log10 of the binomial coefficient C(n, k). */
+double log10Choose(int n, int k)
+{
+	if (k < 0 || k > n)
+		return -std::numeric_limits<double>::infinity();
+	return (std::lgamma(n + 1.0) - std::lgamma(k + 1.0) - std::lgamma(n - k + 1.0)) / std::log(10.0);
+}
+
 } /* namespace */
 
 Correspondence::Correspondence(const TargetModel &target, const CameraModel &camera,
@@ -67,11 +93,14 @@ Correspondence::Correspondence(const TargetModel &target, const CameraModel &cam
 		centroid_mm_ /= static_cast<double>(target_.points_mm.size());
 
 	for (std::size_t f = 0; f < target_.faces.size(); ++f)
-		for (int k = 0; k < 4; ++k)
+		for (int k = 0; k < 4; ++k) {
 			led_faces_[target_.faces[f][k]] |= 1u << f;
+			led_faces_mask_[f] |= 1u << target_.faces[f][k];
+		}
 
 	orientFaces();
 	findSymmetries();
+	findCongruences();
 }
 
 /* Front normals, face centres and in-plane vertex coordinates of every face. */
@@ -94,6 +123,12 @@ void Correspondence::orientFaces()
 			plane[k] = { d.dot(e0), d.dot(e1) };
 		}
 		face_plane_.push_back(plane);
+		std::array<double, 4> frac{};
+		for (int a = 0; a < 4; ++a) {
+			double t = 0.0;
+			diagonalCross(plane[a], plane[(a + 1) % 4], plane[(a + 2) % 4], plane[(a + 3) % 4], &frac[a], &t);
+		}
+		diagonal_frac_.push_back(frac);
 	}
 }
 
@@ -172,6 +207,43 @@ void Correspondence::findSymmetries()
 	}
 }
 
+/*
+ * Near-congruences of faces: face f fitted onto face g in each cyclic
+ * assignment that keeps the front (a rigid turn); kept when the fit is within
+ * 10% of the face's size and the transform is no symmetry of the whole model
+ * (those are folded by canonicalise()).
+ */
+void Correspondence::findCongruences()
+{
+	congruences_.clear();
+	for (std::size_t f = 0; f < target_.faces.size(); ++f)
+		for (std::size_t g = 0; g < target_.faces.size(); ++g)
+			for (int dir = -1; dir <= 1; dir += 2)
+				for (int rot = 0; rot < 4; ++rot) {
+					Eigen::Vector3d src[4], dst[4];
+					double size2 = 0.0;
+					for (int k = 0; k < 4; ++k) {
+						src[k] = target_.points_mm[target_.faces[f][k]];
+						dst[k] = target_.points_mm[target_.faces[g][((rot + dir * k) % 4 + 4) % 4]];
+					}
+					size2 = std::max((src[0] - src[2]).squaredNorm(), (src[1] - src[3]).squaredNorm());
+					Pose t;
+					double sse = 0.0;
+					if (!hornFit(src, dst, 4, &t, false, nullptr, &sse) || sse > 4.0 * 0.01 * size2)
+						continue;
+					/* Fronts must map onto fronts. */
+					if (normals_[g].dot(t.R * normals_[f]) < 0.5)
+						continue;
+					bool known = false;
+					for (const auto &sym : symmetries_)
+						known = known || samePose(t, sym.transform);
+					for (const auto &c : congruences_)
+						known = known || samePose(t, c);
+					if (!known)
+						congruences_.push_back(t);
+				}
+}
+
 /* Is face f seen from its front, within the view angle, from this pose? */
 bool Correspondence::faceVisible(const Pose &pose, std::size_t f) const
 {
@@ -180,12 +252,19 @@ bool Correspondence::faceVisible(const Pose &pose, std::size_t f) const
 	return normals_[f].dot(view) > std::cos(config_.max_view_angle_deg * kPi / 180.0);
 }
 
-/* Is the camera within max_off_axis_deg of the target's approach axis (-z)? */
+/*
+ * Is the target in front of the camera, and (with the target file's approach
+ * prior) the camera within approach.max_deg of its approach axis?
+ */
 bool Correspondence::plausible(const Pose &pose) const
 {
+	if (!(pose.apply(centroid_mm_).z() > 0.0))
+		return false;
+	if (!target_.approach.set)
+		return true;
 	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
 	const Eigen::Vector3d d = camera_t - centroid_mm_;
-	return -d.z() >= std::cos(config_.max_off_axis_deg * kPi / 180.0) * d.norm() && pose.apply(centroid_mm_).z() > 0.0;
+	return target_.approach.axis.dot(d) >= std::cos(target_.approach.max_deg * kPi / 180.0) * d.norm();
 }
 
 /* LEDs on faces seen from the front, projecting inside the frame. */
@@ -231,8 +310,16 @@ int Correspondence::matchPredicted(const Pose &pose, double gate_px, Match *matc
 	std::array<int, kMaxLeds> choice;
 	choice.fill(-1);
 	const double gate2 = gate_px * gate_px;
+	/* An LED shines only out of the faces it sits on: one of them must face the camera. */
+	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
+	std::uint32_t front = 0;
+	for (std::size_t f = 0; f < target_.faces.size(); ++f)
+		if (normals_[f].dot(camera_t - face_centres_[f]) > 0.0)
+			front |= led_faces_mask_[f];
 	for (std::size_t i = 0; i < target_.points_mm.size(); ++i) {
 		Eigen::Vector2d uv;
+		if (!(front & (1u << i)))
+			continue;
 		if (!camera_.project(pose.apply(target_.points_mm[i]), &uv) || !camera_.inImage(uv, -gate_px))
 			continue;
 		int best = -1;
@@ -352,7 +439,86 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 	const std::uint32_t predicted = predictedLeds(h->refined.pose, 0.0);
 	h->expected = __builtin_popcount(predicted);
 	h->missing = __builtin_popcount(predicted & ~h->match.led_mask);
+	h->log10_nfa = log10Nfa(*h);
 	return true;
+}
+
+/*
+ * log10 of the number of hypotheses one family of the full search can form
+ * from this frame's candidates: every candidate anchors the quadrilaterals of
+ * three of its neighbours (8 assignments to each face), or the triangles of
+ * two (for each face, 4 hidden vertices, 6 assignments and 2 starts).
+ * Duplicates are counted, so this bounds the search from above; the factor 2
+ * shares the false-alarm budget between the two families.
+ */
+double Correspondence::log10Tests(bool triangles) const
+{
+	const double m = n_cand_;
+	const double k = std::min(triangles ? config_.triangle_neighbours : config_.neighbours, std::max(n_cand_ - 1, 0));
+	const double faces = static_cast<double>(target_.faces.size());
+	const double n = triangles ? m * 0.5 * k * (k - 1.0) * faces * 48.0
+				   : m * k * (k - 1.0) * (k - 2.0) / 6.0 * faces * 8.0;
+	return std::log10(2.0 * std::max(n, 1.0));
+}
+
+/*
+ * The a-contrario number of false alarms of a verified hypothesis (see the
+ * header): how many of the hypotheses this frame allows would, by chance,
+ * be explained as well by candidates scattered at this frame's density.
+ */
+double Correspondence::log10Nfa(const Hypothesis &h) const
+{
+	const int k = static_cast<int>(h.match.pairs.size());
+	if (k < 4)
+		return 0.0;
+	const int n = std::max(h.expected, k);
+	const CameraIntrinsics &intr = camera_.intrinsics();
+	const double frame_area = static_cast<double>(intr.width) * intr.height;
+
+	/* Residuals, the largest centroid sigma, and the matched blobs' extent. */
+	double max_r2 = 0.0, max_var = 0.0;
+	Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::max());
+	Eigen::Vector2d hi = -lo;
+	std::uint64_t matched = 0;
+	for (const auto &pair : h.match.pairs) {
+		Eigen::Vector2d uv;
+		if (!camera_.project(h.refined.pose.apply(target_.points_mm[pair[0]]), &uv))
+			return 0.0;
+		const int j = pair[1];
+		max_r2 = std::max(max_r2, (uv - px_[j]).squaredNorm());
+		max_var = std::max(max_var, var_[j]);
+		lo = lo.cwiseMin(px_[j]);
+		hi = hi.cwiseMax(px_[j]);
+		matched |= std::uint64_t{ 1 } << j;
+	}
+	/* The fit absorbs 6 of the 2k coordinates: inflate the residual accordingly. */
+	const double inflate2 = 2.0 * k / (2.0 * k - 6.0);
+	const double r2 = std::max(max_r2 * inflate2, 4.0 * max_var);
+
+	/*
+	 * Density: the frame's candidates, or the unmatched ones in a window of
+	 * three times the target's extent around it, whichever is denser.
+	 */
+	const double extent = std::max({ hi.x() - lo.x(), hi.y() - lo.y(), 1.0 });
+	const double x0 = std::max(lo.x() - extent, -0.5), x1 = std::min(hi.x() + extent, intr.width - 0.5);
+	const double y0 = std::max(lo.y() - extent, -0.5), y1 = std::min(hi.y() + extent, intr.height - 0.5);
+	int local = 0;
+	for (std::size_t j = 0; j < px_.size(); ++j)
+		if (usable_[j] && !(matched & (std::uint64_t{ 1 } << j)) && px_[j].x() >= x0 && px_[j].x() <= x1 &&
+		    px_[j].y() >= y0 && px_[j].y() <= y1)
+			++local;
+	const double window_area = std::max((x1 - x0) * (y1 - y0), 1.0);
+	const double rho = std::max(n_cand_ / frame_area, local / window_area);
+
+	const double p = -std::expm1(-rho * kPi * r2);
+	const double tests = h.from_triangle ? log10_triangle_tests_ : log10_quad_tests_;
+	double search = tests + log10Choose(n - 3, k - 3) + (k - 3) * std::log10(std::max(p, 1e-300));
+	if (!h.tracked)
+		return search;
+	/* The prediction's window: one test, every matched LED a chance hit in it. */
+	const double pw = -std::expm1(-rho * kPi * h.track_gate_px * h.track_gate_px);
+	const double window = log10Choose(n, k) + k * std::log10(std::max(pw, 1e-300));
+	return std::log10(2.0) + std::min(search, window);
 }
 
 /*
@@ -362,16 +528,17 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 int Correspondence::minLeds(bool tracking) const
 {
 	const int total = static_cast<int>(target_.points_mm.size());
-	return std::min(tracking ? config_.min_leds_track : config_.min_leds_search, total);
+	return std::max(4, std::min(tracking ? config_.min_leds_track : config_.min_leds_search, total));
 }
 
 bool Correspondence::acceptable(const Hypothesis &h) const
 {
 	return static_cast<int>(h.match.pairs.size()) >= minLeds(h.tracked) && h.missing <= config_.max_missing &&
-	       h.refined.rms_px <= config_.max_rms_px && h.refined.converged && plausible(h.refined.pose);
+	       h.refined.rms_px <= config_.max_rms_px && h.refined.converged && plausible(h.refined.pose) &&
+	       h.log10_nfa <= config_.max_log10_nfa;
 }
 
-/* Acceptable first; then more LEDs explained; then fewer predicted-but-missing; then lower error. */
+/* Acceptable first; then more LEDs explained; then fewer false alarms; then lower error. */
 bool Correspondence::better(const Hypothesis &a, const Hypothesis &b) const
 {
 	const bool aa = acceptable(a), ab = acceptable(b);
@@ -380,8 +547,8 @@ bool Correspondence::better(const Hypothesis &a, const Hypothesis &b) const
 	const int na = static_cast<int>(a.match.pairs.size()), nb = static_cast<int>(b.match.pairs.size());
 	if (na != nb)
 		return na > nb;
-	if (a.missing != b.missing)
-		return a.missing < b.missing;
+	if (a.log10_nfa != b.log10_nfa)
+		return a.log10_nfa < b.log10_nfa;
 	return a.refined.rms_px < b.refined.rms_px;
 }
 
@@ -588,7 +755,7 @@ bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vect
 	Match rough;
 	const double face_px = camera_.intrinsics().fx * (model[0] - model[2]).norm() /
 			       std::max(pose.apply(model[0]).z(), 1.0);
-	if (matchPredicted(pose, std::max(gatePx(pose), 0.5 * face_px), &rough) < minLeds(false) - 1)
+	if (matchPredicted(pose, std::max(gatePx(pose), 0.5 * face_px), &rough) < minLeds(false))
 		return false;
 	/*
 	 * The affine guess of the hidden vertex is only approximate under
@@ -653,34 +820,116 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
 
 	++verified_;
 	Hypothesis h;
+	h.from_triangle = virtual_k >= 0;
 	if (!refineMatch(pose, 2.0 * gate, minLeds(false), &h))
 		return false;
 	keep(h);
 	/*
-	 * Stop early only when every LED of the model is explained with a small
-	 * error. A pose that explains all it predicts but not every LED may be a
-	 * partial symmetry of the target (7 corners of a box: a half turn of
-	 * the box maps 6 of them onto others); then the search goes on so the
-	 * ambiguity test can see the competitor.
+	 * Stop early once a pose is so certain that no chance competitor can
+	 * come close; the structural competitors (near-congruences, the planar
+	 * mirror) are generated explicitly afterwards.
 	 */
-	return acceptable(h) && h.missing == 0 && h.refined.rms_px <= 0.5 * config_.max_rms_px &&
-	       h.match.pairs.size() == target_.points_mm.size() && !planarMatch(h.match);
+	return acceptable(h) && h.log10_nfa <= config_.early_exit_log10_nfa;
 }
 
 /*
- * Every 4-subset in convex position against every face, 4 rotations, both
- * windings. Subsets are visited strongest first (by their weakest member), so
- * with a hypothesis budget the likeliest sets are tried before it runs out.
+ * Each usable candidate's nearest neighbours in undistorted image
+ * coordinates (positions in cand_), nearest first.
  */
-bool Correspondence::searchQuads(const int *cand, int nc)
+void Correspondence::findNeighbours()
 {
-	for (int d = 3; d < nc; ++d)
-		for (int c = 2; c < d; ++c)
-			for (int b = 1; b < c; ++b)
-				for (int a = 0; a < b; ++a) {
-					if (hypotheses_ >= config_.max_hypotheses)
+	const int k = std::min(config_.neighbours, n_cand_ - 1);
+	for (int a = 0; a < n_cand_; ++a) {
+		std::array<double, kMaxCandidates> best_d2;
+		int n = 0;
+		for (int b = 0; b < n_cand_; ++b) {
+			if (b == a)
+				continue;
+			const double d2 = (xy_[cand_[a]] - xy_[cand_[b]]).squaredNorm();
+			if (n == k && d2 >= best_d2[n - 1])
+				continue;
+			/* Insert into the sorted list of the k nearest. */
+			int pos = n < k ? n++ : n - 1;
+			while (pos > 0 && best_d2[pos - 1] > d2) {
+				best_d2[pos] = best_d2[pos - 1];
+				neighbour_list_[a][pos] = neighbour_list_[a][pos - 1];
+				--pos;
+			}
+			best_d2[pos] = d2;
+			neighbour_list_[a][pos] = static_cast<std::int8_t>(b);
+		}
+		n_neighbours_[a] = n;
+		neighbour_bits_[a] = 0;
+		for (int i = 0; i < n; ++i)
+			neighbour_bits_[a] |= std::uint64_t{ 1 } << neighbour_list_[a][i];
+	}
+}
+
+/* The first triangle_neighbours of candidate a's neighbours, as bits. */
+std::uint64_t Correspondence::triangleNeighbours(int a) const
+{
+	std::uint64_t bits = 0;
+	for (int i = 0; i < std::min(n_neighbours_[a], config_.triangle_neighbours); ++i)
+		bits |= std::uint64_t{ 1 } << neighbour_list_[a][i];
+	return bits;
+}
+
+/*
+ * The perspective invariant of a quadrilateral in convex order q[0..3]
+ * (normalised coordinates) against face f in the assignment vertex[]: the
+ * fractions at which its diagonals cross equal the face's own in an affine
+ * view; perspective moves a fraction s along a diagonal whose ends differ in
+ * depth by dZ by s (1 - s) dZ / Z <= dZ / 4Z, and dZ / Z <= l tan(theta) for a
+ * diagonal of image length l tilted by at most the largest view angle theta.
+ * Centroid noise adds about sigma / l.
+ */
+bool Correspondence::screenQuad(const Eigen::Vector2d q[4], std::size_t f, const int vertex[4]) const
+{
+	double s = 0.0, t = 0.0;
+	if (!diagonalCross(q[0], q[1], q[2], q[3], &s, &t))
+		return false;
+	const double tan_max = std::tan(std::min(config_.max_view_angle_deg, 89.0) * kPi / 180.0);
+	const double sigma = config_.screen_sigma_px / camera_.intrinsics().fx;
+	auto tolerance = [&](double l) {
+		const double x = l * tan_max;
+		if (x >= 1.5)
+			return 1.0;
+		return 1.25 * 0.25 * x / (1.0 - 0.5 * x) + 4.0 * sigma / std::max(l, 1e-12);
+	};
+	const double l02 = (q[2] - q[0]).norm(), l13 = (q[3] - q[1]).norm();
+	return std::abs(s - diagonal_frac_[f][vertex[0]]) <= tolerance(l02) &&
+	       std::abs(t - diagonal_frac_[f][vertex[1]]) <= tolerance(l13);
+}
+
+/*
+ * Quadrilaterals of each candidate and three of its neighbours, strongest
+ * anchors first, each set once (at the strongest member whose neighbours
+ * hold the other three), in convex position, screened against every face in
+ * its 8 assignments.
+ */
+bool Correspondence::searchQuads()
+{
+	for (int a = 0; a < n_cand_; ++a) {
+		const int na = n_neighbours_[a];
+		const auto &nb = neighbour_list_[a];
+		for (int i = 0; i < na; ++i)
+			for (int j = i + 1; j < na; ++j)
+				for (int l = j + 1; l < na; ++l) {
+					const int m[3] = { nb[i], nb[j], nb[l] };
+					const std::uint64_t set = (std::uint64_t{ 1 } << a) | (std::uint64_t{ 1 } << m[0]) |
+								  (std::uint64_t{ 1 } << m[1]) | (std::uint64_t{ 1 } << m[2]);
+					bool earlier = false;
+					for (int e = 0; e < 3 && !earlier; ++e) {
+						const std::uint64_t others = set & ~(std::uint64_t{ 1 } << m[e]);
+						earlier = m[e] < a && (neighbour_bits_[m[e]] & others) == others;
+					}
+					if (earlier)
+						continue;
+					if (hypotheses_ >= config_.max_hypotheses) {
+						budget_hit_ = true;
 						return false;
-					const int idx[4] = { cand[a], cand[b], cand[c], cand[d] };
+					}
+					const int idx[4] = { cand_[a], cand_[m[0]], cand_[m[1]], cand_[m[2]] };
 					int order[4];
 					if (!convexOrder(xy_.data(), idx, order))
 						continue;
@@ -695,29 +944,48 @@ bool Correspondence::searchQuads(const int *cand, int nc)
 								int vertex[4];
 								for (int k = 0; k < 4; ++k)
 									vertex[k] = ((rot + dir * k) % 4 + 4) % 4;
+								if (!screenQuad(q, f, vertex))
+									continue;
 								if (tryAssignment(q, uv, f, vertex, -1))
 									return true;
 							}
 				}
+	}
 	return false;
 }
 
 /*
  * Faces with one vertex hidden (an occluded LED shared by two faces leaves no
- * face complete): every image triangle against every face with each vertex
- * missing in turn. The hidden vertex's image is predicted with the affine
- * coordinates it has in the face's plane; the closed form then runs on the
- * four points and the refinement uses only real blobs.
+ * face complete): every image triangle of a candidate and two of its
+ * neighbours, against every face with each shared vertex missing in turn.
+ * The hidden vertex's image is predicted with the affine coordinates it has
+ * in the face's plane; the closed form then runs on the four points and the
+ * refinement uses only real blobs.
  */
-bool Correspondence::searchTriangles(const int *cand, int nc)
+bool Correspondence::searchTriangles()
 {
-	for (int c = 2; c < nc; ++c)
-		for (int b = 1; b < c; ++b)
-			for (int a = 0; a < b; ++a) {
-				if (hypotheses_ >= config_.max_hypotheses)
+	const int budget = std::min(config_.max_hypotheses, hypotheses_ + config_.max_triangle_hypotheses);
+	for (int a0 = 0; a0 < n_cand_; ++a0) {
+		const int na = std::min(n_neighbours_[a0], config_.triangle_neighbours);
+		const auto &nb = neighbour_list_[a0];
+		for (int i = 0; i < na; ++i)
+			for (int j = i + 1; j < na; ++j) {
+				const int m[2] = { nb[i], nb[j] };
+				const std::uint64_t set = (std::uint64_t{ 1 } << a0) | (std::uint64_t{ 1 } << m[0]) |
+							  (std::uint64_t{ 1 } << m[1]);
+				bool earlier = false;
+				for (int e = 0; e < 2 && !earlier; ++e) {
+					const std::uint64_t others = set & ~(std::uint64_t{ 1 } << m[e]);
+					earlier = m[e] < a0 && (triangleNeighbours(m[e]) & others) == others;
+				}
+				if (earlier)
+					continue;
+				if (hypotheses_ >= budget) {
+					budget_hit_ = true;
 					return false;
-				Eigen::Vector2d t[3] = { xy_[cand[a]], xy_[cand[b]], xy_[cand[c]] };
-				int ti[3] = { cand[a], cand[b], cand[c] };
+				}
+				Eigen::Vector2d t[3] = { xy_[cand_[a0]], xy_[cand_[m[0]]], xy_[cand_[m[1]]] };
+				int ti[3] = { cand_[a0], cand_[m[0]], cand_[m[1]] };
 				/* Counter-clockwise, and not collinear. */
 				double area = cross2(t[1] - t[0], t[2] - t[0]);
 				if (area < 0.0) {
@@ -765,17 +1033,34 @@ bool Correspondence::searchTriangles(const int *cand, int nc)
 							}
 					}
 			}
+	}
 	return false;
+}
+
+/*
+ * The structural competitors of a chosen pose: each near-congruence of the
+ * model applied to it (the same image points explained by other LEDs),
+ * verified like any hypothesis and kept beside it for the ambiguity test.
+ */
+void Correspondence::addCompetitors(const Hypothesis &chosen)
+{
+	const Pose &pose = chosen.refined.pose;
+	for (const Pose &c : congruences_) {
+		/* C(T(X)) = P(X): C = P o T^-1. */
+		Pose start;
+		start.R = pose.R * c.R.transpose();
+		start.t_mm = pose.t_mm - start.R * c.t_mm;
+		if (!plausible(start))
+			continue;
+		Hypothesis h;
+		if (refineMatch(start, 2.0 * gatePx(start), minLeds(false), &h))
+			keep(h);
+	}
 }
 
 bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *result)
 {
-	/* The strongest usable candidates take part in the search. */
-	std::array<int, kMaxCandidates> cand;
-	int nc = 0;
-	for (std::size_t j = 0; j < px_.size() && nc < config_.max_search_candidates; ++j)
-		if (usable_[j])
-			cand[nc++] = static_cast<int>(j);
+	findNeighbours();
 
 	/*
 	 * Unless a quadrilateral gave a complete explanation (every predicted LED
@@ -783,27 +1068,34 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	 * hidden no face is complete, and the true pose comes only from there,
 	 * while a wrong, incomplete one may have come from the quadrilaterals.
 	 */
-	bool complete = searchQuads(cand.data(), nc);
+	bool complete = searchQuads();
 	for (const auto &h : kept_)
 		complete = complete || (acceptable(h) && h.missing == 0);
+	const int quad_hyp = hypotheses_, quad_ver = verified_;
 	if (!complete)
-		searchTriangles(cand.data(), nc);
+		searchTriangles();
+	if (std::getenv("DP_DEBUG"))
+		std::fprintf(stderr, "search: cand %d quads %d/%d triangles %d/%d\n", n_cand_, quad_hyp, quad_ver,
+			     hypotheses_ - quad_hyp, verified_ - quad_ver);
 
-	result->budget_exhausted = hypotheses_ >= config_.max_hypotheses;
+	result->budget_exhausted = budget_hit_;
 	if (kept_.empty())
 		return false;
-	std::size_t best = 0;
-	for (std::size_t i = 1; i < kept_.size(); ++i)
-		if (better(kept_[i], kept_[best]))
-			best = i;
+	auto bestKept = [this] {
+		std::size_t best = 0;
+		for (std::size_t i = 1; i < kept_.size(); ++i)
+			if (better(kept_[i], kept_[best]))
+				best = i;
+		return best;
+	};
+	std::size_t best = bestKept();
+	if (acceptable(kept_[best])) {
+		const Hypothesis first = kept_[best];
+		addCompetitors(first);
+		best = bestKept();
+	}
 	Hypothesis chosen = kept_[best];
-	/*
-	 * A search cut short by the budget may not have met the competitor that
-	 * makes a pose ambiguous: then only a pose that explains every LED of
-	 * the model is trusted.
-	 */
-	if (result->budget_exhausted && chosen.match.pairs.size() < target_.points_mm.size())
-		return false;
+	result->log10_nfa = chosen.log10_nfa;
 	if (!acceptable(chosen)) {
 		result->error_too_large = chosen.refined.rms_px > config_.max_rms_px &&
 					  static_cast<int>(chosen.match.pairs.size()) >= minLeds(false);
@@ -828,6 +1120,11 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 			symmetric = symmetric || samePose(equivalent, chosen.refined.pose);
 		}
 		if (!symmetric) {
+			if (std::getenv("DP_DEBUG"))
+				std::fprintf(stderr, "ambiguous: chosen k=%zu nfa=%.1f rms=%.3f t=(%.0f %.0f %.0f) other k=%zu nfa=%.1f rms=%.3f t=(%.0f %.0f %.0f) rot=%.1f\n",
+					     chosen.match.pairs.size(), chosen.log10_nfa, chosen.refined.rms_px, chosen.refined.pose.t_mm.x(), chosen.refined.pose.t_mm.y(), chosen.refined.pose.t_mm.z(),
+					     other.match.pairs.size(), other.log10_nfa, other.refined.rms_px, other.refined.pose.t_mm.x(), other.refined.pose.t_mm.y(), other.refined.pose.t_mm.z(),
+					     rotationAngleDeg(other.refined.pose.R, chosen.refined.pose.R));
 			result->ambiguous = true;
 			return false;
 		}
@@ -851,27 +1148,45 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 	*result = CorrespondenceResult{};
 	hypotheses_ = 0;
 	verified_ = 0;
+	budget_hit_ = false;
 	kept_.clear();
 	px_.clear();
 	xy_.clear();
 	usable_.clear();
-	int usable = 0;
+	var_.clear();
+	cov_.clear();
+	n_cand_ = 0;
+	const double floor2 = config_.refine.sigma_px * config_.refine.sigma_px;
 	for (const auto &blob : blobs) {
 		const Eigen::Vector2d uv{ blob.u_px, blob.v_px };
 		Eigen::Vector2d xy = Eigen::Vector2d::Zero();
 		const bool ok = camera_.pixelToNormalized(uv, &xy);
+		if (ok)
+			cand_[n_cand_++] = static_cast<int>(px_.size());
 		px_.push_back(uv);
 		xy_.push_back(xy);
 		usable_.push_back(ok ? 1 : 0);
-		usable += ok ? 1 : 0;
+		Eigen::Matrix2d cov;
+		cov << blob.cov_uu_px2, blob.cov_uv_px2, blob.cov_uv_px2, blob.cov_vv_px2;
+		const bool known = blob.cov_uu_px2 > 0.0 && blob.cov_vv_px2 > 0.0;
+		if (!known)
+			cov = floor2 * Eigen::Matrix2d::Identity();
+		cov_.push_back(cov);
+		/* The larger eigenvalue of the 2x2 covariance. */
+		const double half_tr = 0.5 * (cov(0, 0) + cov(1, 1));
+		const double det = cov(0, 0) * cov(1, 1) - cov(0, 1) * cov(0, 1);
+		var_.push_back(half_tr + std::sqrt(std::max(half_tr * half_tr - det, 0.0)));
 	}
-	if (usable < minLeds(true))
+	log10_quad_tests_ = log10Tests(false);
+	log10_triangle_tests_ = log10Tests(true);
+	if (n_cand_ < minLeds(true))
 		return false;
 
 	if (prediction) {
 		Hypothesis h;
 		h.tracked = true;
 		const double gate = std::max(config_.track_gate_px, 0.15 * sizePx(*prediction));
+		h.track_gate_px = gate;
 		if (refineMatch(*prediction, gate, minLeds(true), &h) && acceptable(h) &&
 		    !(planarMatch(h.match) && planarFlipExplains(h))) {
 			canonicalise(prediction, &h);
@@ -882,6 +1197,7 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 			result->refined = h.refined;
 			result->match = h.match;
 			result->expected_visible = h.expected;
+			result->log10_nfa = h.log10_nfa;
 			result->verified = 1;
 			return true;
 		}

@@ -3,26 +3,52 @@
  * Correspondence: which blob is which model LED (method.md section 4), and the
  * pose that follows.
  *
- * Full search: every 4-subset of candidates in convex position is tried
- * against every model face in its 4 cyclic rotations, in both windings. Each
- * (subset, face, rotation) is screened by the depth ratios and side lengths
- * of section 5, then by the closed-form pose: the face must be seen from its
- * front, the camera within max_off_axis_deg of the target's approach axis,
- * and the four points must reproject; then it is verified by projecting every model LED that the hypothesis
- * says is visible and counting the candidates that agree; the best few are
- * refined over all their matches. A pose is accepted only when
- *  - it explains at least min_leds_search LEDs (min_leds_track when tracking)
- *    and misses at most max_missing of the
- *    LEDs it predicts to be visible inside the frame,
- *  - the refined rms reprojection error is within max_rms_px, and
- *  - no other, different pose explains the image as well (else Ambiguous).
- * Poses that differ only by a symmetry of the target (e.g. the wedge's 180°
- * turn about its axis) are one pose: the one closest to the tracked pose,
- * else to the model's own orientation, is reported.
+ * Hypotheses. Every usable candidate (up to kMaxCandidates) takes part. Each
+ * candidate's k nearest neighbours (in undistorted image coordinates) span
+ * the quadrilaterals it anchors, strongest anchors first, each quadrilateral
+ * once. A quadrilateral in convex position is screened against every face in
+ * its 8 cyclic assignments by a perspective invariant: where its diagonals
+ * cross, as fractions along each diagonal. Those fractions are the face's own
+ * under an affine view and move by at most a quarter of the diagonal's
+ * relative depth change under perspective, a bound that follows from the
+ * diagonal's image length and the largest view angle. Survivors go through the
+ * depth ratios and side lengths of method.md section 5, the closed-form pose
+ * (the face seen from its front; the optional approach prior of the target
+ * file), reprojection of their own points, and verification: every model LED
+ * the pose predicts visible is matched to the nearest candidate, refined over
+ * all matches (weighted by each blob's centroid covariance), matched again.
+ * When a shared LED is hidden and no face is complete, image triangles are
+ * tried against faces with one vertex hidden (its image predicted from its
+ * affine coordinates in the face).
  *
- * When no face is complete (a hidden LED shared by two faces), image
- * triangles are tried against faces with one vertex hidden, the hidden
- * vertex predicted from its affine coordinates in the face.
+ * Acceptance: an a-contrario false-alarm bound, not an LED count. For a
+ * verified pose with k of its n predicted LEDs matched, the number of false
+ * alarms is
+ *     NFA = N_tests * C(n - 3, k - 3) * p^(k - 3),
+ *     p = 1 - exp(-rho * pi * r^2),
+ * the expected number of hypotheses, among the N_tests this frame's
+ * candidates allow the search to form, that candidates scattered at random at
+ * this frame's density rho would explain as well: three points fix a pose,
+ * each further LED must land within r of its prediction. rho is the larger of
+ * the frame's candidate density and that of the unmatched candidates around
+ * the target; r is the largest matched residual (inflated for the degrees of
+ * freedom the fit absorbed), never below twice the largest centroid sigma. A
+ * tracked pose is also tested against its prediction's window (one test,
+ * every LED a chance hit within the window), and the smaller of the two,
+ * doubled, is its NFA. A pose is accepted when log10 NFA <= max_log10_nfa,
+ * it rests on at least min_leds LEDs (a floor), its rms reprojection error is
+ * within max_rms_px, and no other, different pose explains the image as well
+ * (else Ambiguous): the competitors are the other hypotheses kept, the
+ * model's near-congruences of faces applied to the chosen pose (a box corner
+ * half-turned maps six of its seven LEDs onto others), and, for a planar
+ * match, the mirror pose about the line of sight. Poses that differ only by a
+ * symmetry of the target (e.g. the wedge's 180 degree turn about its axis)
+ * are one pose: the one closest to the tracked pose, else to the model's own
+ * orientation, is reported.
+ *
+ * The search stops early once a verified pose's NFA is below
+ * early_exit_log10_nfa: no chance competitor can come close, and the
+ * structural ones are generated explicitly.
  *
  * Tracking: with a previous pose, predicted LED positions are matched first;
  * the full search runs only when that fails.
@@ -51,28 +77,26 @@ struct CorrespondenceConfig {
 	double gate_frac = 0.04;
 	/* Tracking: first match within this many pixels (or 15% of target size) of the prediction. */
 	double track_gate_px = 12.0;
-	/*
-	 * Acceptance. Four points of one face fit a random quadrilateral of
-	 * clutter too often over thousands of hypotheses, so the full search
-	 * needs five LEDs (or all of a smaller model); a tracked pose, supported
-	 * by its prediction, may rest on four.
-	 */
-	int min_leds_search = 5;
+	/* Acceptance: log10 of the largest number of false alarms (see above). */
+	double max_log10_nfa = -4.0;
+	/* Stop the search once a verified pose is this certain. */
+	double early_exit_log10_nfa = -8.0;
+	/* Floors: LEDs a pose must rest on, from the full search and from tracking. */
+	int min_leds_search = 4;
 	int min_leds_track = 4;
-	int max_missing = 2;
+	/* Predicted-visible LEDs that may be unmatched (occlusion); the NFA already weighs them. */
+	int max_missing = static_cast<int>(kMaxLeds);
 	double max_rms_px = 0.6;
-	/* Full search considers at most this many candidates (strongest first) ... */
-	int max_search_candidates = 24;
-	/* ... and screens at most this many (subset, face, rotation) hypotheses per frame. */
+	/* Neighbours of each candidate that span its quadrilaterals, and its triangles. */
+	int neighbours = 9;
+	int triangle_neighbours = 6;
+	/* Centroid error (px) the invariant screen tolerates beyond the blob's own sigma. */
+	double screen_sigma_px = 1.0;
+	/* Screen at most this many (subset, face, assignment) hypotheses per frame, of them this many from triangles. */
 	int max_hypotheses = 60000;
+	int max_triangle_hypotheses = 8000;
 	/* Faces seen more obliquely than this (or from behind) are predicted invisible. */
 	double max_view_angle_deg = 80.0;
-	/*
-	 * Poses that put the camera more than this off the target's approach
-	 * axis (-z in target coordinates, see TargetModel::frontNormals) are not
-	 * considered: a docking target is approached from its front.
-	 */
-	double max_off_axis_deg = 75.0;
 	RefineOptions refine;
 };
 
@@ -90,6 +114,7 @@ struct CorrespondenceResult {
 	RefineResult refined;
 	Match match;
 	int expected_visible = 0; /* LEDs the accepted pose predicts inside the frame */
+	double log10_nfa = 0.0;	  /* of the accepted pose (or of the best rejected one) */
 	int hypotheses = 0;	  /* closed-form hypotheses screened */
 	int verified = 0;	  /* hypotheses verified by projecting all LEDs */
 };
@@ -121,6 +146,9 @@ private:
 		int expected = 0;	/* LEDs predicted visible inside the frame */
 		int missing = 0;	/* predicted visible but not matched */
 		bool tracked = false;	/* found from the tracked prediction */
+		double track_gate_px = 0.0; /* the prediction's window, when tracked */
+		bool from_triangle = false; /* generated by the hidden-vertex search */
+		double log10_nfa = 0.0;
 	};
 	static constexpr std::size_t kMaxKept = 8;
 
@@ -147,8 +175,15 @@ private:
 	bool verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4], const Eigen::Vector2d uv[4],
 		    int virtual_k);
 	static Pose mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t, const Eigen::Vector3d &normal_t);
-	bool searchQuads(const int *cand, int nc);
-	bool searchTriangles(const int *cand, int nc);
+	double log10Nfa(const Hypothesis &hypothesis) const;
+	double log10Tests(bool triangles) const;
+	void findCongruences();
+	void addCompetitors(const Hypothesis &chosen);
+	void findNeighbours();
+	std::uint64_t triangleNeighbours(int a) const;
+	bool screenQuad(const Eigen::Vector2d q[4], std::size_t f, const int vertex[4]) const;
+	bool searchQuads();
+	bool searchTriangles();
 	bool fullSearch(const Pose *reference, CorrespondenceResult *result);
 
 	TargetModel target_;
@@ -165,13 +200,38 @@ private:
 	StaticVector<std::array<Eigen::Vector2d, 4>, kMaxFaces> face_plane_;
 	/* For each LED, the faces it belongs to (bit mask). */
 	std::array<std::uint32_t, kMaxLeds> led_faces_{};
+	/* For each face, its LEDs (bit mask). */
+	std::array<std::uint32_t, kMaxFaces> led_faces_mask_{};
+	/*
+	 * Where the diagonals of face f cross: diagonal_frac_[f][a] is the
+	 * fraction along the diagonal from vertex a to vertex a + 2.
+	 */
+	StaticVector<std::array<double, 4>, kMaxFaces> diagonal_frac_;
+	/*
+	 * Near-congruences: rigid transforms that map one face onto another (or
+	 * onto itself turned) within 10% of its size, but are no symmetry of
+	 * the whole model. Applied to a chosen pose they give its structural
+	 * competitors.
+	 */
+	StaticVector<Pose, 8 * kMaxFaces * kMaxFaces> congruences_;
 
 	/* Per-frame scratch (sized here, reused). */
 	StaticVector<Eigen::Vector2d, kMaxCandidates> px_;
 	StaticVector<Eigen::Vector2d, kMaxCandidates> xy_;
 	StaticVector<std::uint8_t, kMaxCandidates> usable_;
+	StaticVector<double, kMaxCandidates> var_; /* centroid variance along its major axis, px^2 */
+	StaticVector<Eigen::Matrix2d, kMaxCandidates> cov_; /* centroid covariance, px^2 */
+	/* Usable candidates, strongest first, and each one's nearest neighbours (as bits and a list). */
+	std::array<int, kMaxCandidates> cand_{};
+	int n_cand_ = 0;
+	std::array<std::uint64_t, kMaxCandidates> neighbour_bits_{};
+	std::array<std::array<std::int8_t, kMaxCandidates>, kMaxCandidates> neighbour_list_{};
+	std::array<int, kMaxCandidates> n_neighbours_{};
+	double log10_quad_tests_ = 0.0; /* hypotheses the full search can form on this frame */
+	double log10_triangle_tests_ = 0.0;
 	StaticVector<Hypothesis, kMaxKept> kept_;
 	int hypotheses_ = 0;
+	bool budget_hit_ = false;
 	int verified_ = 0;
 };
 

@@ -86,6 +86,7 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 	result_.q = quaternionFromRotation(pose.R);
 	result_.rpy_deg = rollPanTiltDegFromRotation(pose.R);
 	result_.rms_px = match.refined.rms_px;
+	result_.log10_nfa = match.log10_nfa;
 	result_.leds_used = static_cast<int>(match.match.pairs.size());
 	result_.led_mask = match.match.led_mask;
 	result_.covariance = match.refined.covariance;

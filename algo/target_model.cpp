@@ -71,14 +71,21 @@ void TargetModel::frontNormals(StaticVector<Eigen::Vector3d, kMaxFaces> *normals
 				}
 			}
 		}
-		/* The group faces -z; edge-on to z, it faces away from the centroid. */
-		double towards_camera = 0.0, outward = 0.0;
+		/*
+		 * The group faces outward, away from the LEDs' centroid (the LEDs
+		 * of a polyhedral target shine out of its hull). A planar group has
+		 * no outside: it faces the approach prior's axis when the file gives
+		 * one, else -z (the camera at the nominal docking pose, method.md).
+		 */
+		double outward = 0.0, towards_camera = 0.0;
+		const Eigen::Vector3d axis = approach.set ? approach.axis : Eigen::Vector3d(-Eigen::Vector3d::UnitZ());
 		for (std::size_t f = 0; f < nf; ++f)
 			if (group[f] == groups) {
-				towards_camera -= (*normals)[f].z();
 				outward += (*normals)[f].dot(centres[f] - centroid);
+				towards_camera += (*normals)[f].dot(axis);
 			}
-		const bool flip = std::abs(towards_camera) > 1e-6 ? towards_camera < 0.0 : outward < 0.0;
+		const double scale = std::max(diameterMm(), 1e-9);
+		const bool flip = std::abs(outward) > 1e-6 * scale ? outward < 0.0 : towards_camera < 0.0;
 		if (flip)
 			for (std::size_t f = 0; f < nf; ++f)
 				if (group[f] == groups)

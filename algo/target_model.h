@@ -49,12 +49,13 @@ struct TargetModel {
 
 	/*
 	 * Unit normal of each face pointing to the side its LEDs shine to (the
-	 * front), in the target frame. Faces that share an edge are oriented
-	 * consistently (the shared edge runs in opposite directions); each
-	 * connected group of faces then faces -z, the approach axis: at the
-	 * nominal docking pose (R = I) the camera looks along the target's +z
-	 * axis, as for the wedge of method.md. A group lying edge-on to z faces
-	 * away from the LEDs' centroid. Allocates: never.
+	 * front), in the target frame, from the model's own geometry. Faces that
+	 * share an edge are oriented consistently (the shared edge runs in
+	 * opposite directions); each connected group of faces then faces outward,
+	 * away from the LEDs' centroid. A planar group (no outside) faces the
+	 * approach axis when one is set, else -z: at the nominal docking pose
+	 * (R = I) the camera looks along the target's +z axis, as for the wedge
+	 * of method.md. Allocates: never.
 	 */
 	void frontNormals(StaticVector<Eigen::Vector3d, kMaxFaces> *normals) const;
 };
