@@ -1,6 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 #include "algo/correspondence.h"
 
+#include "algo/p3p.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -456,7 +458,7 @@ double Correspondence::log10Tests(bool triangles) const
 	const double m = n_cand_;
 	const double k = std::min(triangles ? config_.triangle_neighbours : config_.neighbours, std::max(n_cand_ - 1, 0));
 	const double faces = static_cast<double>(target_.faces.size());
-	const double n = triangles ? m * 0.5 * k * (k - 1.0) * faces * 48.0
+	const double n = triangles ? m * 0.5 * k * (k - 1.0) * faces * 96.0
 				   : m * k * (k - 1.0) * (k - 2.0) / 6.0 * faces * 8.0;
 	return std::log10(2.0 * std::max(n, 1.0));
 }
@@ -687,12 +689,11 @@ void Correspondence::keep(const Hypothesis &h)
 /*
  * One assignment of four image points (normalised q, pixels uv) to the
  * vertices of face f (vertex[k] is the face-local index for image point k).
- * Point `virtual_k` (or -1) is not a blob but the affine prediction of a
- * hidden vertex. Screens, solves, verifies and keeps the hypothesis; returns
- * true when it is good enough to stop the search.
+ * Screens, solves, verifies and keeps the hypothesis; returns true when it is
+ * good enough to stop the search.
  */
 bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4], std::size_t f,
-				   const int vertex[4], int virtual_k)
+				   const int vertex[4])
 {
 	++hypotheses_;
 	Eigen::Vector2d plane[4];
@@ -714,11 +715,10 @@ bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vect
 		const double D = cross2(q[j] - q[i], q[l] - q[i]); /* det[q_i q_j q_l] with unit third row */
 		const double A = cross2(plane[j] - plane[i], plane[l] - plane[i]);
 		Z[m] = -D / A;
-		/* (Not for an affine guess of a hidden vertex: strong perspective can flip it.) */
-		if (virtual_k < 0 && (!(Z[m] > 0.0) || !std::isfinite(Z[m])))
+		if (!(Z[m] > 0.0) || !std::isfinite(Z[m]))
 			return false;
 	}
-	if (virtual_k < 0) {
+	{
 		/* ... and reproduce the face's six side lengths up to one scale. */
 		double sdl = 0.0, sdd = 0.0, sll = 0.0, d_ij[6], l_ij[6];
 		int e = 0;
@@ -743,45 +743,7 @@ bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vect
 	Pose pose;
 	if (!solveFourCoplanar(model, q, &pose))
 		return false;
-	if (virtual_k < 0)
-		return verify(pose, f, model, uv, virtual_k);
-
-	/*
-	 * Cheap test first: the rough pose must already put at least one other
-	 * LED near a blob (within half the face's size).
-	 */
-	if (!plausible(pose))
-		return false;
-	Match rough;
-	const double face_px = camera_.intrinsics().fx * (model[0] - model[2]).norm() /
-			       std::max(pose.apply(model[0]).z(), 1.0);
-	if (matchPredicted(pose, std::max(gatePx(pose), 0.5 * face_px), &rough) < minLeds(false))
-		return false;
-	/*
-	 * The affine guess of the hidden vertex is only approximate under
-	 * perspective: fit the three real points exactly (three points, six
-	 * unknowns). Three points have up to four such poses; start from the
-	 * closed form's pose and from its mirror about the line of sight, the
-	 * two a small face is most often confused between.
-	 */
-	Eigen::Vector3d model3[3];
-	Eigen::Vector2d px3[3];
-	for (int k = 0, n = 0; k < 4; ++k)
-		if (k != virtual_k) {
-			model3[n] = model[k];
-			px3[n++] = uv[k];
-		}
-	RefineOptions quick = config_.refine;
-	quick.max_iterations = 8;
-	quick.covariance = false;
-	const Pose starts[2] = { pose, mirrorPose(pose, face_centres_[f], normals_[f]) };
-	for (const Pose &start : starts) {
-		RefineResult exact;
-		if (refinePose(camera_, model3, px3, 3, start, quick, &exact) &&
-		    verify(exact.pose, f, model, uv, virtual_k))
-			return true;
-	}
-	return false;
+	return verify(pose, f, model, uv);
 }
 
 /*
@@ -804,15 +766,13 @@ Pose Correspondence::mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_
 
 /* The checks every hypothesis pose goes through, then verification; true: stop the search. */
 bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4],
-			    const Eigen::Vector2d uv[4], int virtual_k)
+			    const Eigen::Vector2d uv[4])
 {
 	if (!faceVisible(pose, f) || !plausible(pose))
 		return false;
-	/* The pose must reproject its own (real) points. */
+	/* The pose must reproject its own points. */
 	const double gate = gatePx(pose);
 	for (int k = 0; k < 4; ++k) {
-		if (k == virtual_k)
-			continue;
 		Eigen::Vector2d p;
 		if (!camera_.project(pose.apply(model[k]), &p) || (p - uv[k]).squaredNorm() > 4.0 * gate * gate)
 			return false;
@@ -820,7 +780,6 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
 
 	++verified_;
 	Hypothesis h;
-	h.from_triangle = virtual_k >= 0;
 	if (!refineMatch(pose, 2.0 * gate, minLeds(false), &h))
 		return false;
 	keep(h);
@@ -946,7 +905,7 @@ bool Correspondence::searchQuads()
 									vertex[k] = ((rot + dir * k) % 4 + 4) % 4;
 								if (!screenQuad(q, f, vertex))
 									continue;
-								if (tryAssignment(q, uv, f, vertex, -1))
+								if (tryAssignment(q, uv, f, vertex))
 									return true;
 							}
 				}
@@ -955,12 +914,41 @@ bool Correspondence::searchQuads()
 }
 
 /*
+ * Three image points (normalised) on three vertices of face f: the poses of
+ * P3P, each seen from the face's front, must put one more LED on a candidate
+ * before it is verified. True: stop the search.
+ */
+bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3], std::size_t f)
+{
+	++hypotheses_;
+	Pose poses[4];
+	const int n = solveP3p(model, q, poses);
+	for (int k = 0; k < n; ++k) {
+		const Pose &pose = poses[k];
+		if (!faceVisible(pose, f) || !plausible(pose))
+			continue;
+		const double gate = 2.0 * gatePx(pose);
+		Match rough;
+		if (matchPredicted(pose, gate, &rough) < minLeds(false))
+			continue;
+		++verified_;
+		Hypothesis h;
+		h.from_triangle = true;
+		if (!refineMatch(pose, gate, minLeds(false), &h))
+			continue;
+		keep(h);
+		if (acceptable(h) && h.log10_nfa <= config_.early_exit_log10_nfa)
+			return true;
+	}
+	return false;
+}
+
+/*
  * Faces with one vertex hidden (an occluded LED shared by two faces leaves no
  * face complete): every image triangle of a candidate and two of its
  * neighbours, against every face with each shared vertex missing in turn.
- * The hidden vertex's image is predicted with the affine coordinates it has
- * in the face's plane; the closed form then runs on the four points and the
- * refinement uses only real blobs.
+ * Each assignment of the three points to three vertices of the face gives up
+ * to four poses (P3P); each is verified like a quadrilateral's.
  */
 bool Correspondence::searchTriangles()
 {
@@ -1010,25 +998,14 @@ bool Correspondence::searchTriangles()
 						for (int dir = -1; dir <= 1; dir += 2)
 							for (int rot = 0; rot < 3; ++rot) {
 								/* Face vertices in cyclic order (direction dir) starting after `missing`. */
-								int vertex[4];
-								for (int k = 0; k < 4; ++k)
-									vertex[k] = ((missing + dir * (k + 1)) % 4 + 4) % 4;
-								/* vertex[3] == missing; image points for vertex[0..2], rotated. */
-								Eigen::Vector2d q[4], uv[4];
+								Eigen::Vector3d model[3];
+								Eigen::Vector2d q[3];
 								for (int k = 0; k < 3; ++k) {
+									const int vertex = ((missing + dir * (k + 1)) % 4 + 4) % 4;
+									model[k] = target_.points_mm[target_.faces[f][vertex]];
 									q[k] = t[(k + rot) % 3];
-									uv[k] = px_[ti[(k + rot) % 3]];
 								}
-								/* Affine coordinates of the hidden vertex in the face plane. */
-								const Eigen::Vector2d p0 = face_plane_[f][vertex[0]];
-								Eigen::Matrix2d basis;
-								basis.col(0) = face_plane_[f][vertex[1]] - p0;
-								basis.col(1) = face_plane_[f][vertex[2]] - p0;
-								const Eigen::Vector2d ab =
-									basis.inverse() * (face_plane_[f][vertex[3]] - p0);
-								q[3] = q[0] + ab.x() * (q[1] - q[0]) + ab.y() * (q[2] - q[0]);
-								uv[3] = camera_.normalizedToPixel(q[3]);
-								if (tryAssignment(q, uv, f, vertex, 3))
+								if (tryTriangle(model, q, f))
 									return true;
 							}
 					}

@@ -18,8 +18,7 @@
  * the pose predicts visible is matched to the nearest candidate, refined over
  * all matches (weighted by each blob's centroid covariance), matched again.
  * When a shared LED is hidden and no face is complete, image triangles are
- * tried against faces with one vertex hidden (its image predicted from its
- * affine coordinates in the face).
+ * tried against three vertices of each face (P3P, up to four poses each).
  *
  * Acceptance: an a-contrario false-alarm bound, not an LED count. For a
  * verified pose with k of its n predicted LEDs matched, the number of false
@@ -170,10 +169,9 @@ private:
 	void canonicalise(const Pose *reference, Hypothesis *hypothesis) const;
 	void keep(const Hypothesis &hypothesis);
 	int minLeds(bool tracking) const;
-	bool tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4], std::size_t f, const int vertex[4],
-			   int virtual_k);
-	bool verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4], const Eigen::Vector2d uv[4],
-		    int virtual_k);
+	bool tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4], std::size_t f, const int vertex[4]);
+	bool verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4], const Eigen::Vector2d uv[4]);
+	bool tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3], std::size_t f);
 	static Pose mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t, const Eigen::Vector3d &normal_t);
 	double log10Nfa(const Hypothesis &hypothesis) const;
 	double log10Tests(bool triangles) const;

@@ -1,0 +1,28 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The perspective-three-point problem: the poses that put three known model
+ * points on three known viewing rays. Grunert's solution (as reviewed by
+ * Haralick et al., IJCV 1994): the ratios of the three depths satisfy a
+ * quartic; each real root gives the depths, and Horn's fit of the model to
+ * the three camera-frame points gives the pose.
+ *
+ * Units: model points in mm, rays as normalised image coordinates (x, y, 1).
+ * Allocates: never (fixed-size Eigen types only).
+ */
+#pragma once
+
+#include <Eigen/Core>
+
+#include "algo/pose.h"
+
+namespace dockpose {
+
+/*
+ * Up to four poses with R model_mm[i] + t on the ray through xy[i]
+ * (i = 0, 1, 2), every point in front of the camera. Returns how many were
+ * written to poses[]. Degenerate input (collinear model points, coincident
+ * rays) gives none.
+ */
+int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pose poses[4]);
+
+} /* namespace dockpose */
