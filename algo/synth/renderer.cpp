@@ -21,6 +21,13 @@
  * led_peak (reference_range_mm / range)^2 cos(view angle), floored at
  * min_led_peak, times led_gain; the frame saturates at 255.
  *
+ * The harder scenes reuse the same spot: a blooming LED is its spot
+ * overexposed plus a second, round and softer spot (the halo); a motion-blurred
+ * spot is the spot summed at evenly spaced positions along the streak (spacing
+ * at most half the blur sigma, so the sum is smooth), each with its share of
+ * the amplitude; a sunlit patch is a soft-edged ellipse (a cubic smoothstep
+ * across its edge) added to the background.
+ *
  * Frame assembly is tiled (64 x 64 pixels): per tile, every spot and glint
  * touching the tile is accumulated into a stack buffer of doubles, the
  * background (level + linear gradient) and the read noise are added, and the
@@ -38,6 +45,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -51,11 +59,15 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kInvSqrt2 = 0.70710678118654752440;
 constexpr double kInvSqrt2Pi = 0.39894228040143267794;
+constexpr double kSqrt3 = 1.73205080756887729353;
 
 /* Reflections and glints beyond these counts are not drawn (truth says how many were). */
 constexpr std::size_t kMaxReflections = 64;
 constexpr std::size_t kMaxGlints = 64;
 constexpr std::size_t kMaxSpots = kMaxLeds + kMaxReflections;
+constexpr std::size_t kMaxSunPatches = 16;
+/* Samples along a motion-blur streak, at most. */
+constexpr int kMaxStreakSamples = 256;
 constexpr int kTile = 64;
 /* Place attempts per clutter item before it is given up. */
 constexpr int kPlaceAttempts = 200;
@@ -108,6 +120,10 @@ struct Spot {
 	double slope = 0.0; /* chord centre shift per px of delta */
 	double amplitude = 0.0; /* levels per px^2 of emitter */
 	double extent_px = 0.0; /* radius that holds the spot (for clutter placement) */
+	double sigma_px = 0.8; /* its blur */
+	/* Motion blur: the spot summed at centre + ((k + 0.5) / n - 0.5) (du, dv), k < n. */
+	double streak_du = 0.0, streak_dv = 0.0;
+	int streak_n = 1;
 	int n_theta = 0;
 	int x0 = 0, x1 = -1, y0 = 0, y1 = -1; /* bounding box, inclusive */
 };
@@ -120,6 +136,27 @@ struct Glint {
 	int x0 = 0, x1 = -1, y0 = 0, y1 = -1;
 };
 
+/* A sunlit patch: a soft-edged bright ellipse. */
+struct SunPatch {
+	double cu = 0.0, cv = 0.0;
+	double cos_a = 1.0, sin_a = 0.0; /* orientation of the first semi-axis */
+	double inv_a = 1.0, inv_b = 1.0; /* 1 / semi-axes, px */
+	double r_min = 1.0; /* min(a, b): the edge is nowhere steeper than edge_px says */
+	double edge_px = 10.0; /* the edge ramps from 0 to peak over 2 edge_px */
+	double peak = 100.0;
+	int x0 = 0, x1 = -1, y0 = 0, y1 = -1;
+
+	double level(double x, double y) const
+	{
+		const double dx = x - cu, dy = y - cv;
+		const double p = (cos_a * dx + sin_a * dy) * inv_a;
+		const double q = (-sin_a * dx + cos_a * dy) * inv_b;
+		const double d = (std::sqrt(p * p + q * q) - 1.0) * r_min; /* px outside, at most */
+		const double t = std::clamp((edge_px - d) / (2.0 * edge_px), 0.0, 1.0);
+		return peak * t * t * (3.0 - 2.0 * t);
+	}
+};
+
 /*
  * Build a spot from its centre, its shape matrix M = A A^T (the ellipse is
  * {c + A s : |s| <= 1}) and its continuous peak level above background.
@@ -129,6 +166,7 @@ Spot makeSpot(const Eigen::Vector2d &c, const Eigen::Matrix2d &M_in, double peak
 	Spot s;
 	s.cu = c.x();
 	s.cv = c.y();
+	s.sigma_px = sigma_px;
 	/* Keep the ellipse from collapsing entirely (edge-on); 0.01 px is far below the blur. */
 	Eigen::Matrix2d M = M_in;
 	M(0, 0) += 1e-4;
@@ -172,11 +210,66 @@ Spot makeSpot(const Eigen::Vector2d &c, const Eigen::Matrix2d &M_in, double peak
 }
 
 /*
- * Add the pixel integrals of spot s over the tile [tx0, tx0 + tw) x
- * [ty0, ty0 + th) into acc (row stride kTile).
+ * The continuous value of spot s per unit amplitude (before the pixel
+ * integral, one streak position) at (du, dv) from its centre.
  */
-void accumulateSpot(const Spot &s, double sigma_px, int tx0, int ty0, int tw, int th, double *acc)
+double spotValue(const Spot &s, double du, double dv)
 {
+	const double sigma_px = s.sigma_px;
+	const double dtheta = kPi / s.n_theta;
+	double v = 0.0;
+	for (int k = 0; k < s.n_theta; ++k) {
+		const double theta = -0.5 * kPi + (k + 0.5) * dtheta;
+		const double delta = s.half_height * std::sin(theta);
+		const double w = s.half_height * std::cos(theta) * dtheta;
+		const double half = std::cos(theta) * s.inv_sqrt_a;
+		const double mid = s.slope * delta - du;
+		const double ey = (delta - dv) / sigma_px;
+		const double gy = kInvSqrt2Pi / sigma_px * std::exp(-0.5 * ey * ey);
+		v += w * gy *
+		     (normalCdf((mid + half) / sigma_px) - normalCdf((mid - half) / sigma_px));
+	}
+	return v;
+}
+
+/*
+ * Smear spot s along the streak (du, dv) (its length in px): samples spaced at
+ * most half the blur sigma. The amplitude is left as it is (so the energy is
+ * kept); returns the streak's continuous value at its centre per unit
+ * amplitude, for the caller to set the brightness.
+ */
+double makeStreak(Spot *s, double du, double dv)
+{
+	const double length = std::hypot(du, dv);
+	if (!(length > 0.0))
+		return spotValue(*s, 0.0, 0.0);
+	const double step = std::min(0.5, 0.5 * s->sigma_px);
+	s->streak_n =
+		std::clamp(static_cast<int>(std::ceil(length / step)) + 1, 2, kMaxStreakSamples);
+	s->streak_du = du;
+	s->streak_dv = dv;
+	s->x0 = static_cast<int>(std::floor(s->x0 - 0.5 * std::abs(du)));
+	s->x1 = static_cast<int>(std::ceil(s->x1 + 0.5 * std::abs(du)));
+	s->y0 = static_cast<int>(std::floor(s->y0 - 0.5 * std::abs(dv)));
+	s->y1 = static_cast<int>(std::ceil(s->y1 + 0.5 * std::abs(dv)));
+	s->extent_px += 0.5 * length;
+	double centre = 0.0;
+	for (int k = 0; k < s->streak_n; ++k) {
+		const double o = (k + 0.5) / s->streak_n - 0.5;
+		centre += spotValue(*s, -o * du, -o * dv);
+	}
+	return centre / s->streak_n;
+}
+
+/*
+ * Add the pixel integrals of one streak position of spot s (centre cu, cv,
+ * amplitude) over the tile [tx0, tx0 + tw) x [ty0, ty0 + th) into acc (row
+ * stride kTile).
+ */
+void accumulateSpotAt(const Spot &s, double cu, double cv, double amplitude, int tx0, int ty0,
+		      int tw, int th, double *acc)
+{
+	const double sigma_px = s.sigma_px;
 	const int cx0 = std::max(s.x0, tx0), cx1 = std::min(s.x1, tx0 + tw - 1);
 	const int cy0 = std::max(s.y0, ty0), cy1 = std::min(s.y1, ty0 + th - 1);
 	if (cx0 > cx1 || cy0 > cy1)
@@ -192,11 +285,11 @@ void accumulateSpot(const Spot &s, double sigma_px, int tx0, int ty0, int tw, in
 		const double theta = -0.5 * kPi + (k + 0.5) * dtheta;
 		const double ct = std::cos(theta);
 		const double delta = s.half_height * std::sin(theta);
-		const double w = s.amplitude * s.half_height * ct * dtheta;
+		const double w = amplitude * s.half_height * ct * dtheta;
 		const double half = ct * s.inv_sqrt_a;
-		const double l = s.cu + s.slope * delta - half; /* chord, absolute px */
-		const double r = s.cu + s.slope * delta + half;
-		const double yc = s.cv + delta;
+		const double l = cu + s.slope * delta - half; /* chord, absolute px */
+		const double r = cu + s.slope * delta + half;
+		const double yc = cv + delta;
 
 		/* Rows: the pixel-box integral of the Gaussian about yc. */
 		for (int j = 0; j <= nr; ++j)
@@ -226,6 +319,21 @@ void accumulateSpot(const Spot &s, double sigma_px, int tx0, int ty0, int tw, in
 			for (int i = 0; i < nc; ++i)
 				row[i] += wy * fx[i];
 		}
+	}
+}
+
+/* Add spot s, every position of its streak, over the tile into acc. */
+void accumulateSpot(const Spot &s, int tx0, int ty0, int tw, int th, double *acc)
+{
+	if (s.streak_n <= 1) {
+		accumulateSpotAt(s, s.cu, s.cv, s.amplitude, tx0, ty0, tw, th, acc);
+		return;
+	}
+	const double amplitude = s.amplitude / s.streak_n;
+	for (int k = 0; k < s.streak_n; ++k) {
+		const double o = (k + 0.5) / s.streak_n - 0.5;
+		accumulateSpotAt(s, s.cu + o * s.streak_du, s.cv + o * s.streak_dv, amplitude, tx0,
+				 ty0, tw, th, acc);
 	}
 }
 
@@ -352,6 +460,13 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 	Rng rng_glints(splitmix64(scene_seed ^ 0x676c6e74ULL));
 	Rng rng_hot(splitmix64(scene_seed ^ 0x686f7470ULL));
 	const std::uint64_t noise_key = splitmix64(seed ^ 0x6e6f6973ULL);
+	/* The harder scenes have streams of their own, so turning one on leaves the rest alone. */
+	Rng rng_near(splitmix64(scene_seed ^ 0x6e656172ULL));
+	Rng rng_shape(splitmix64(scene_seed ^ 0x73686170ULL));
+	Rng rng_sun(splitmix64(scene_seed ^ 0x73756e70ULL));
+	Rng rng_face(splitmix64(seed ^ 0x66616365ULL));
+	Rng rng_dim(splitmix64(seed ^ 0x64696d6dULL));
+	Rng rng_motion(splitmix64(seed ^ 0x6d6f746eULL));
 
 	/* Where every LED lands, and which ones shine towards the camera. */
 	std::array<Eigen::Vector2d, kMaxLeds> led_px;
@@ -372,9 +487,41 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 		if (ledVisible(pose, i, options.max_view_angle_deg))
 			drawable |= 1u << i;
 	}
+	if (!options.draw_target)
+		drawable = 0;
 
-	/* Occlusion: random drawable LEDs, plus the mask. */
+	/* Occlusion: all but one face, the mask, then random drawable LEDs. */
 	std::uint32_t occluded = options.occlusion_mask & drawable;
+	int kept_face = -1;
+	if (drawable != 0 && (options.keep_face >= 0 || options.one_face_only)) {
+		auto faceMask = [&](std::size_t f) {
+			std::uint32_t m = 0;
+			for (int v : target_.faces[f])
+				m |= 1u << v;
+			return m;
+		};
+		if (options.keep_face >= 0 &&
+		    options.keep_face < static_cast<int>(target_.faces.size())) {
+			kept_face = options.keep_face;
+		} else if (options.keep_face < 0) {
+			/* A random complete face, else one with the most drawable LEDs. */
+			std::array<int, kMaxFaces> best{};
+			int n_best = 0, best_count = 0;
+			for (std::size_t f = 0; f < target_.faces.size(); ++f) {
+				const int count = std::popcount(faceMask(f) & drawable);
+				if (count > best_count) {
+					best_count = count;
+					n_best = 0;
+				}
+				if (count == best_count && count > 0)
+					best[n_best++] = static_cast<int>(f);
+			}
+			if (n_best > 0)
+				kept_face = best[rng_face.index(n_best)];
+		}
+		if (kept_face >= 0)
+			occluded |= drawable & ~faceMask(kept_face);
+	}
 	{
 		std::array<int, kMaxLeds> pool{};
 		int n_pool = 0;
@@ -387,10 +534,82 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 			pool[pick] = pool[--n_pool];
 		}
 	}
-	const std::uint32_t visible = drawable & ~occluded;
+	std::uint32_t visible = drawable & ~occluded;
+
+	/* Dimmed LEDs: the mask, then random ones; a factor per LED in LED order. */
+	std::array<double, kMaxLeds> brightness;
+	brightness.fill(1.0);
+	std::uint32_t dimmed = options.dim_mask & visible;
+	{
+		std::array<int, kMaxLeds> pool{};
+		int n_pool = 0;
+		for (int i = 0; i < n_leds; ++i)
+			if ((visible & ~dimmed) & (1u << i))
+				pool[n_pool++] = i;
+		for (int n = 0; n < options.dimmed_leds && n_pool > 0; ++n) {
+			const int pick = rng_dim.index(n_pool);
+			dimmed |= 1u << pool[pick];
+			pool[pick] = pool[--n_pool];
+		}
+		for (int i = 0; i < n_leds; ++i)
+			if (dimmed & (1u << i))
+				brightness[i] = rng_dim.uniform(options.dim_min, options.dim_max);
+	}
+
+	/* Motion blur: one streak for the frame. */
+	const bool streaked = options.motion_blur_px > 0.0;
+	double streak_angle = 0.0;
+	if (streaked)
+		streak_angle = std::isnan(options.motion_blur_angle_deg)
+				       ? rng_motion.uniform(0.0, 2.0 * kPi)
+				       : options.motion_blur_angle_deg * kPi / 180.0;
+	const double streak_du = options.motion_blur_px * std::cos(streak_angle);
+	const double streak_dv = options.motion_blur_px * std::sin(streak_angle);
+	const bool blooming = options.bloom > 0.0;
+
+	/*
+	 * Blooming and motion blur of a spot: overexposure and halo, streak and
+	 * brightness; the halo goes to *halos, and the radius that holds both is
+	 * returned. floor_peak: the streak's peak is not lowered below it.
+	 */
+	StaticVector<Spot, kMaxSpots> halos;
+	auto harden = [&](Spot *spot, const Eigen::Matrix2d &M, double peak, double floor_peak,
+			  double halo_peak, bool bloom_it, bool streak_it) {
+		double outer = spot->extent_px;
+		if (bloom_it) {
+			const double r_spot = std::max(
+				std::sqrt(std::max(
+					0.0,
+					0.5 * (M.trace() +
+					       std::sqrt(std::max(
+						       0.0,
+						       (M(0, 0) - M(1, 1)) * (M(0, 0) - M(1, 1)) +
+							       4.0 * M(0, 1) * M(0, 1)))))),
+				sigma);
+			const double r_halo = options.bloom * r_spot;
+			const double sigma_halo = std::max(sigma, 0.25 * r_halo);
+			Spot h = makeSpot(Eigen::Vector2d(spot->cu, spot->cv),
+					  Eigen::Matrix2d::Identity() * r_halo * r_halo, halo_peak,
+					  sigma_halo);
+			if (streak_it)
+				h.amplitude = halo_peak / makeStreak(&h, streak_du, streak_dv);
+			outer = std::max(outer, h.extent_px);
+			halos.push_back(h);
+		}
+		if (streak_it) {
+			const double per_amplitude = makeStreak(spot, streak_du, streak_dv);
+			const double kept = spot->amplitude * per_amplitude; /* energy kept */
+			const double target = std::min(peak, std::max(kept, floor_peak));
+			spot->amplitude = per_amplitude > 0.0 ? target / per_amplitude : 0.0;
+			outer = std::max(outer, spot->extent_px);
+		}
+		return outer;
+	};
 
 	/* LED spots. */
 	StaticVector<Spot, kMaxSpots> spots;
+	std::array<double, kMaxSpots> outer_extent{}; /* spot and its halo */
+	std::array<double, kMaxLeds> led_peak_level{}; /* contrast of LED spot s */
 	std::array<int, kMaxLeds> spot_led{}; /* LED of spot s (for the first n_led_spots) */
 	const double cos_shape_min = std::cos(kMaxShapeAngleDeg * kPi / 180.0);
 	for (int i = 0; i < n_leds; ++i) {
@@ -431,11 +650,25 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 		E.col(1) = e2;
 		const Eigen::Matrix2d A = options.led_radius_mm * (J * E);
 		const double ratio = options.reference_range_mm / range;
-		const double peak = std::max(options.min_led_peak,
-					     options.led_peak * ratio * ratio * cos_view) *
-				    options.led_gain;
+		double base =
+			std::max(options.min_led_peak, options.led_peak * ratio * ratio * cos_view);
+		if (blooming)
+			base = std::max(base * options.bloom_overexposure, 1.5 * 255.0);
+		double peak = base * options.led_gain;
+		if (dimmed & (1u << i))
+			peak *= brightness[i];
+		const Eigen::Matrix2d M = A * A.transpose();
 		spot_led[spots.size()] = i;
-		spots.push_back(makeSpot(uv, A * A.transpose(), peak, sigma));
+		led_peak_level[spots.size()] = peak;
+		Spot spot = makeSpot(uv, M, peak, sigma);
+		outer_extent[spots.size()] = spot.extent_px;
+		if (blooming || streaked)
+			outer_extent[spots.size()] =
+				harden(&spot, M, peak,
+				       options.min_led_peak * options.led_gain * brightness[i],
+				       options.bloom_halo_peak * options.led_gain * brightness[i],
+				       blooming, streaked);
+		spots.push_back(spot);
 	}
 	const std::size_t n_led_spots = spots.size();
 
@@ -452,8 +685,45 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 	std::array<double, kMaxLeds> led_clearance;
 	led_clearance.fill(typical_radius_px + 3.0 * sigma);
 	for (std::size_t s = 0; s < n_led_spots; ++s)
-		led_clearance[spot_led[s]] =
-			std::max(led_clearance[spot_led[s]], spots[s].extent_px);
+		led_clearance[spot_led[s]] = std::max(led_clearance[spot_led[s]], outer_extent[s]);
+	/* On a target-free frame clutter may be anywhere. */
+	const bool avoid_leds = options.draw_target;
+	const bool bloom_clutter = blooming && options.bloom_reflections;
+	const bool streak_clutter = streaked && options.motion_blur_reflections;
+	/* A reflection of radius r at c, shaped, bloomed and streaked like the LEDs. */
+	auto addReflection = [&](const Eigen::Vector2d &c, double radius, double peak) {
+		Eigen::Matrix2d M = Eigen::Matrix2d::Identity() * radius * radius;
+		if (options.reflection_squash > 0.0) {
+			const double q = rng_shape.uniform(
+				1.0 - std::min(options.reflection_squash, 0.9), 1.0);
+			const double a = rng_shape.uniform(0.0, kPi);
+			Eigen::Matrix2d rot;
+			rot << std::cos(a), -std::sin(a), std::sin(a), std::cos(a);
+			M = rot *
+			    Eigen::Vector2d(radius * radius, q * q * radius * radius).asDiagonal() *
+			    rot.transpose();
+		}
+		if (bloom_clutter)
+			peak = std::max(peak * options.bloom_overexposure, 1.5 * 255.0);
+		Spot spot = makeSpot(c, M, peak, sigma);
+		outer_extent[spots.size()] = spot.extent_px;
+		if (bloom_clutter || streak_clutter)
+			outer_extent[spots.size()] = harden(&spot, M, peak, options.min_led_peak,
+							    options.bloom_halo_peak, bloom_clutter,
+							    streak_clutter);
+		spots.push_back(spot);
+	};
+	/* The radius that a reflection of radius r will hold once bloomed and streaked. */
+	auto reflectionExtent = [&](double radius) {
+		double extent = radius + 3.0 * sigma;
+		if (bloom_clutter) {
+			const double r_halo = options.bloom * std::max(radius, sigma);
+			extent = std::max(extent, r_halo + 3.0 * std::max(sigma, 0.25 * r_halo));
+		}
+		if (streak_clutter)
+			extent += 0.5 * options.motion_blur_px;
+		return extent;
+	};
 	auto ledClearance = [&](int i) {
 		return led_clearance[i];
 	};
@@ -470,21 +740,84 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 			const Eigen::Vector2d c(rng_reflections.uniform(margin, width - 1 - margin),
 						rng_reflections.uniform(margin,
 									height - 1 - margin));
-			const double extent = radius + 3.0 * sigma;
+			const double extent = reflectionExtent(radius);
 			bool clear = true;
-			for (int i = 0; i < n_leds && clear; ++i)
+			for (int i = 0; i < n_leds && clear && avoid_leds; ++i)
 				if (led_px[i].allFinite() &&
 				    (c - led_px[i]).norm() < extent + ledClearance(i) + 3.0)
 					clear = false;
 			for (std::size_t s = n_led_spots; s < spots.size() && clear; ++s)
 				if ((c - Eigen::Vector2d(spots[s].cu, spots[s].cv)).norm() <
-				    extent + spots[s].extent_px + 3.0)
+				    extent + outer_extent[s] + 3.0)
 					clear = false;
 			if (!clear)
 				continue;
-			spots.push_back(makeSpot(c, Eigen::Matrix2d::Identity() * radius * radius,
-						 peak, sigma));
+			addReflection(c, radius, peak);
 			break;
+		}
+	}
+
+	/*
+	 * Reflections near the target: inside the bounding box of the LEDs that
+	 * project into the frame, grown by half its size on each side (the whole
+	 * frame when none does), clear of the LED spots and of each other by
+	 * near_clearance_px only.
+	 */
+	const int n_near = std::clamp(options.near_reflections, 0,
+				      static_cast<int>(kMaxReflections) -
+					      static_cast<int>(spots.size() - n_led_spots));
+	if (n_near > 0) {
+		double bx0 = width, bx1 = -1.0, by0 = height, by1 = -1.0;
+		for (int i = 0; i < n_leds; ++i)
+			if (led_px[i].allFinite() && camera_.inImage(led_px[i])) {
+				bx0 = std::min(bx0, led_px[i].x());
+				bx1 = std::max(bx1, led_px[i].x());
+				by0 = std::min(by0, led_px[i].y());
+				by1 = std::max(by1, led_px[i].y());
+			}
+		if (bx1 < bx0) {
+			bx0 = 0.0;
+			bx1 = width - 1.0;
+			by0 = 0.0;
+			by1 = height - 1.0;
+		} else {
+			const double grow =
+				0.5 * std::max(bx1 - bx0, by1 - by0) + 4.0 * typical_radius_px;
+			bx0 -= grow;
+			bx1 += grow;
+			by0 -= grow;
+			by1 += grow;
+		}
+		const double gap = std::max(0.0, options.near_clearance_px);
+		for (int n = 0; n < n_near; ++n) {
+			for (int attempt = 0; attempt < kPlaceAttempts; ++attempt) {
+				const double radius =
+					typical_radius_px * rng_near.uniform(0.7, 1.3);
+				const double peak = typical_peak * rng_near.uniform(0.6, 1.0);
+				const double margin = radius + 3.0 * sigma;
+				const double x0 = std::max(margin, bx0),
+					     x1 = std::min(width - 1 - margin, bx1);
+				const double y0 = std::max(margin, by0),
+					     y1 = std::min(height - 1 - margin, by1);
+				if (x1 <= x0 || y1 <= y0)
+					break;
+				const Eigen::Vector2d c(rng_near.uniform(x0, x1),
+							rng_near.uniform(y0, y1));
+				const double extent = reflectionExtent(radius);
+				bool clear = true;
+				for (int i = 0; i < n_leds && clear && avoid_leds; ++i)
+					if (led_px[i].allFinite() &&
+					    (c - led_px[i]).norm() < extent + ledClearance(i) + gap)
+						clear = false;
+				for (std::size_t s = n_led_spots; s < spots.size() && clear; ++s)
+					if ((c - Eigen::Vector2d(spots[s].cu, spots[s].cv)).norm() <
+					    extent + outer_extent[s] + gap)
+						clear = false;
+				if (!clear)
+					continue;
+				addReflection(c, radius, peak);
+				break;
+			}
 		}
 	}
 
@@ -512,15 +845,14 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 			const double reach = 4.0 * g.sigma_px + 1.0;
 			const double clear_px = 3.0 * g.sigma_px + 3.0;
 			bool clear = true;
-			for (int i = 0; i < n_leds && clear; ++i)
+			for (int i = 0; i < n_leds && clear && avoid_leds; ++i)
 				if (led_px[i].allFinite() &&
 				    pointSegmentDistance(led_px[i], g.p0, g.p1) <
 					    ledClearance(i) + clear_px)
 					clear = false;
 			for (std::size_t s = n_led_spots; s < spots.size() && clear; ++s)
 				if (pointSegmentDistance(Eigen::Vector2d(spots[s].cu, spots[s].cv),
-							 g.p0,
-							 g.p1) < spots[s].extent_px + clear_px)
+							 g.p0, g.p1) < outer_extent[s] + clear_px)
 					clear = false;
 			for (std::size_t q = 0; q < glints.size() && clear; ++q)
 				if (segmentDistance(g.p0, g.p1, glints[q].p0, glints[q].p1) <
@@ -537,6 +869,32 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 		}
 	}
 
+	/* Sunlit patches: anywhere, over the target too. */
+	StaticVector<SunPatch, kMaxSunPatches> patches;
+	const int n_patches = std::clamp(options.sun_patches, 0, static_cast<int>(kMaxSunPatches));
+	for (int n = 0; n < n_patches; ++n) {
+		const double side = std::max(width, height);
+		const double a = side * rng_sun.uniform(0.06, 0.25);
+		const double b = side * rng_sun.uniform(0.06, 0.25);
+		const double angle = rng_sun.uniform(0.0, kPi);
+		SunPatch p;
+		p.cu = rng_sun.uniform(0.0, width - 1.0);
+		p.cv = rng_sun.uniform(0.0, height - 1.0);
+		p.cos_a = std::cos(angle);
+		p.sin_a = std::sin(angle);
+		p.inv_a = 1.0 / a;
+		p.inv_b = 1.0 / b;
+		p.r_min = std::min(a, b);
+		p.edge_px = rng_sun.uniform(15.0, std::max(15.0, 0.5 * std::min(a, b)));
+		p.peak = rng_sun.uniform(options.sun_peak_min, options.sun_peak_max);
+		const double reach = std::max(a, b) * (1.0 + p.edge_px / p.r_min) + 1.0;
+		p.x0 = std::max(0, static_cast<int>(std::floor(p.cu - reach)));
+		p.x1 = std::min(width - 1, static_cast<int>(std::ceil(p.cu + reach)));
+		p.y0 = std::max(0, static_cast<int>(std::floor(p.cv - reach)));
+		p.y1 = std::min(height - 1, static_cast<int>(std::ceil(p.cv + reach)));
+		patches.push_back(p);
+	}
+
 	/* Background: a linear gradient of `gradient` levels across the frame, random direction. */
 	const double gradient_angle = rng_gradient.uniform(0.0, 2.0 * kPi);
 	const double gdx = std::cos(gradient_angle), gdy = std::sin(gradient_angle);
@@ -544,6 +902,7 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 	const double gscale = span > 0.0 ? options.gradient / span : 0.0;
 	const double mid_x = 0.5 * (width - 1), mid_y = 0.5 * (height - 1);
 	const bool noisy = options.noise_sigma > 0.0;
+	const bool fast_noise = noisy && options.fast_noise;
 	const std::uint64_t pairs_per_row = (static_cast<std::uint64_t>(width) + 1) / 2;
 
 	std::array<double, kTile * kTile> acc;
@@ -555,11 +914,24 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 			for (const Spot &s : spots)
 				if (s.x1 >= tx0 && s.x0 < tx0 + tw && s.y1 >= ty0 &&
 				    s.y0 < ty0 + th)
-					accumulateSpot(s, sigma, tx0, ty0, tw, th, acc.data());
+					accumulateSpot(s, tx0, ty0, tw, th, acc.data());
+			for (const Spot &s : halos)
+				if (s.x1 >= tx0 && s.x0 < tx0 + tw && s.y1 >= ty0 &&
+				    s.y0 < ty0 + th)
+					accumulateSpot(s, tx0, ty0, tw, th, acc.data());
 			for (const Glint &g : glints)
 				if (g.x1 >= tx0 && g.x0 < tx0 + tw && g.y1 >= ty0 &&
 				    g.y0 < ty0 + th)
 					accumulateGlint(g, tx0, ty0, tw, th, acc.data());
+			for (const SunPatch &p : patches) {
+				const int cx0 = std::max(p.x0, tx0),
+					  cx1 = std::min(p.x1, tx0 + tw - 1);
+				const int cy0 = std::max(p.y0, ty0),
+					  cy1 = std::min(p.y1, ty0 + th - 1);
+				for (int y = cy0; y <= cy1; ++y)
+					for (int x = cx0; x <= cx1; ++x)
+						acc[(y - ty0) * kTile + (x - tx0)] += p.level(x, y);
+			}
 
 			for (int j = 0; j < th; ++j) {
 				const int y = ty0 + j;
@@ -567,12 +939,39 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 					out->data() + static_cast<std::size_t>(y) * width;
 				const double bg_row =
 					options.background + gscale * (y - mid_y) * gdy;
-				for (int i = 0; i < tw; ++i) {
+				/*
+				 * Box-Muller on a hash of the pixel pair (x even, x + 1):
+				 * cos for the even pixel, sin for the odd one. Tiles start
+				 * at even x, so a pair never straddles two tiles.
+				 */
+				if (fast_noise) {
+					for (int i = 0; i < tw; ++i) {
+						const int x = tx0 + i;
+						const std::uint64_t h = splitmix64(
+							noise_key +
+							static_cast<std::uint64_t>(y) * width +
+							static_cast<std::uint64_t>(x));
+						const double sum =
+							static_cast<double>((h & 0xffff) +
+									    ((h >> 16) & 0xffff) +
+									    ((h >> 32) & 0xffff) +
+									    (h >> 48)) +
+							2.0;
+						/* Four uniforms in (0, 1): mean 2, variance 1/3. */
+						const double z = (sum * 0x1.0p-16 - 2.0) * kSqrt3;
+						const double v = bg_row +
+								 gscale * (x - mid_x) * gdx +
+								 acc[j * kTile + i] +
+								 options.noise_sigma * z;
+						row[x] = static_cast<std::uint8_t>(std::clamp(
+							std::floor(v + 0.5), 0.0, 255.0));
+					}
+					continue;
+				}
+				for (int i = 0; i < tw; i += 2) {
 					const int x = tx0 + i;
-					double v = bg_row + gscale * (x - mid_x) * gdx +
-						   acc[j * kTile + i];
+					double z_even = 0.0, z_odd = 0.0;
 					if (noisy) {
-						/* Box-Muller on a hash of the pixel pair: cos for even x, sin for odd. */
 						const std::uint64_t h = splitmix64(
 							noise_key +
 							static_cast<std::uint64_t>(y) *
@@ -586,13 +985,18 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 							 0.5) *
 							0x1.0p-32;
 						const double r = std::sqrt(-2.0 * std::log(u1));
-						const double z =
-							(x & 1) ? r * std::sin(2.0 * kPi * u2)
-								: r * std::cos(2.0 * kPi * u2);
-						v += options.noise_sigma * z;
+						z_even = r * std::cos(2.0 * kPi * u2);
+						z_odd = r * std::sin(2.0 * kPi * u2);
 					}
-					row[x] = static_cast<std::uint8_t>(
-						std::clamp(std::floor(v + 0.5), 0.0, 255.0));
+					for (int q = 0; q < 2 && i + q < tw; ++q) {
+						double v = bg_row + gscale * (x + q - mid_x) * gdx +
+							   acc[j * kTile + i + q];
+						if (noisy)
+							v += options.noise_sigma *
+							     (q ? z_odd : z_even);
+						row[x + q] = static_cast<std::uint8_t>(std::clamp(
+							std::floor(v + 0.5), 0.0, 255.0));
+					}
 				}
 			}
 		}
@@ -609,6 +1013,10 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 			for (std::size_t s = 0; s < spots.size() && clear; ++s)
 				if (x >= spots[s].x0 && x <= spots[s].x1 && y >= spots[s].y0 &&
 				    y <= spots[s].y1)
+					clear = false;
+			for (std::size_t s = 0; s < halos.size() && clear; ++s)
+				if (x >= halos[s].x0 && x <= halos[s].x1 && y >= halos[s].y0 &&
+				    y <= halos[s].y1)
 					clear = false;
 			for (std::size_t q = 0; q < glints.size() && clear; ++q)
 				if (pointSegmentDistance(Eigen::Vector2d(x, y), glints[q].p0,
@@ -629,6 +1037,28 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 		}
 	}
 
+	/*
+	 * LEDs lost in a sunlit patch: less than half the contrast they would have
+	 * on the plain background is left below 255.
+	 */
+	std::uint32_t washed_out = 0;
+	if (!patches.empty()) {
+		for (std::size_t s = 0; s < n_led_spots; ++s) {
+			const double x = spots[s].cu, y = spots[s].cv;
+			double bg = options.background + gscale * (y - mid_y) * gdy +
+				    gscale * (x - mid_x) * gdx;
+			for (const SunPatch &p : patches)
+				bg += p.level(x, y);
+			const double peak = led_peak_level[s];
+			const double full =
+				std::min(peak, 255.0 - std::clamp(options.background, 0.0, 254.0));
+			const double left = std::min(peak, 255.0 - bg);
+			if (left < 0.5 * full)
+				washed_out |= 1u << spot_led[s];
+		}
+		visible &= ~washed_out;
+	}
+
 	if (truth) {
 		truth->pose = pose;
 		truth->led_px.clear();
@@ -637,6 +1067,12 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 		truth->visible_mask = visible;
 		truth->occluded_mask = occluded;
 		truth->clutter_blobs = static_cast<int>(spots.size() - n_led_spots + glints.size());
+		truth->dimmed_mask = dimmed;
+		truth->washed_out_mask = washed_out;
+		truth->kept_face = kept_face;
+		truth->motion_blur_angle_deg = streaked ? streak_angle * 180.0 / kPi : 0.0;
+		truth->sun_patches = static_cast<int>(patches.size());
+		truth->target_drawn = options.draw_target;
 	}
 }
 
@@ -654,6 +1090,104 @@ Pose poseAt(const CameraIntrinsics &camera, const TargetModel &target, double ra
 	const Eigen::Vector3d centre_c = range_mm * Eigen::Vector3d(xy.x(), xy.y(), 1.0);
 	pose.t_mm = centre_c - pose.R * centroidOf(target);
 	return pose;
+}
+
+} /* namespace dockpose */
+
+namespace dockpose {
+
+bool targetInFrame(const CameraModel &camera, const TargetModel &target, const Pose &pose,
+		   double margin_px)
+{
+	for (const auto &point : target.points_mm) {
+		const Eigen::Vector3d p = pose.apply(point);
+		Eigen::Vector2d uv, xy;
+		if (!(p.z() > 1e-6) || !camera.project(p, &uv) || !camera.inImage(uv, margin_px))
+			return false;
+		const Eigen::Vector2d ideal(p.x() / p.z(), p.y() / p.z());
+		if (!camera.pixelToNormalized(uv, &xy) || (xy - ideal).norm() > 1e-6)
+			return false;
+	}
+	return true;
+}
+
+Pose poseFromSide(const CameraIntrinsics &camera, const TargetModel &target, double range_mm,
+		  const SideView &view)
+{
+	Pose pose;
+	if (view.face < 0 || view.face >= static_cast<int>(target.faces.size()))
+		return pose;
+	StaticVector<Eigen::Vector3d, kMaxFaces> normals;
+	target.frontNormals(&normals);
+	const Eigen::Vector3d n = normals[view.face];
+	Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+	for (int v : target.faces[view.face])
+		centre += target.points_mm[v];
+	centre /= 4.0;
+
+	/* From the face's centre towards the camera, target frame. */
+	const double k = kPi / 180.0;
+	const Eigen::Vector3d e1 = n.unitOrthogonal(), e2 = n.cross(e1);
+	const Eigen::Vector3d d =
+		std::cos(view.angle_deg * k) * n +
+		std::sin(view.angle_deg * k) *
+			(std::cos(view.azimuth_deg * k) * e1 + std::sin(view.azimuth_deg * k) * e2);
+
+	/* The line of sight to the face's centre, camera frame. */
+	const CameraModel model(camera);
+	const Eigen::Vector2d uv(view.u_frac * camera.width - 0.5,
+				 view.v_frac * camera.height - 0.5);
+	Eigen::Vector2d xy;
+	if (!model.pixelToNormalized(uv, &xy))
+		xy = Eigen::Vector2d((uv.x() - camera.cx) / camera.fx,
+				     (uv.y() - camera.cy) / camera.fy);
+	const Eigen::Vector3d ray = Eigen::Vector3d(xy.x(), xy.y(), 1.0).normalized();
+
+	/* R d = -ray (the camera is along d from the face), then the roll about the ray. */
+	const Eigen::Matrix3d R0 = Eigen::Quaterniond::FromTwoVectors(d, -ray).toRotationMatrix();
+	pose.R = Eigen::AngleAxisd(view.roll_deg * k, ray).toRotationMatrix() * R0;
+	pose.t_mm = range_mm * ray - pose.R * centre;
+	return pose;
+}
+
+bool sampleSideView(const CameraIntrinsics &camera, const TargetModel &target, int face,
+		    double range_mm, double max_angle_deg, std::uint64_t seed, Pose *pose,
+		    SideView *view, double margin_px)
+{
+	SideView v;
+	v.face = face;
+	Rng rng(splitmix64(seed ^ 0x73696465ULL));
+	const double cos_max = std::cos(std::clamp(max_angle_deg, 0.0, 180.0) * kPi / 180.0);
+	v.angle_deg = std::acos(std::clamp(rng.uniform(cos_max, 1.0), -1.0, 1.0)) * 180.0 / kPi;
+	v.azimuth_deg = rng.uniform(0.0, 360.0);
+	v.roll_deg = rng.uniform(0.0, 360.0);
+	if (view)
+		*view = v;
+	*pose = Pose();
+	if (face < 0 || face >= static_cast<int>(target.faces.size()))
+		return false;
+
+	/* Anywhere in the frame first; then ever nearer the centre; last the centre itself. */
+	const CameraModel model(camera);
+	constexpr int kUniform = 48, kShrinking = 16;
+	for (int attempt = 0; attempt <= kUniform + kShrinking; ++attempt) {
+		double spread = 0.5;
+		if (attempt >= kUniform)
+			spread = 0.5 * (kUniform + kShrinking - attempt) / (kShrinking + 1.0);
+		v.u_frac = 0.5 + rng.uniform(-spread, spread);
+		v.v_frac = 0.5 + rng.uniform(-spread, spread);
+		if (attempt == kUniform + kShrinking)
+			v.u_frac = v.v_frac = 0.5;
+		*pose = poseFromSide(camera, target, range_mm, v);
+		if (targetInFrame(model, target, *pose, margin_px)) {
+			if (view)
+				*view = v;
+			return true;
+		}
+	}
+	if (view)
+		*view = v;
+	return false;
 }
 
 } /* namespace dockpose */

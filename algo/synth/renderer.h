@@ -2,9 +2,12 @@
 /*
  * Synthetic frames with known truth: the target's LEDs as elliptical spots
  * that shrink and dim with range and viewing angle, sensor noise, an ambient
- * gradient, and optional clutter (hot pixels, LED-like reflections, long
- * glints) and occlusion. Used by tests, the `dockpose render` tool and the
- * simulated camera. Deterministic for a given seed.
+ * gradient, and optional clutter (hot pixels, LED-like reflections, also close
+ * to the target, long glints), sunlit patches, blooming, motion blur, dimmed
+ * LEDs, occlusion (random LEDs, or all but one face) and target-free frames.
+ * Used by tests, the `dockpose render` tool, the simulated camera and the
+ * accuracy evaluation. Deterministic for a given seed. Every effect is off by
+ * default, and the defaults render exactly the frames they always did.
  *
  * Visibility: an LED shines into the half-space in front of its faces (the
  * fronts of TargetModel::frontNormals, shared with the solver); an LED is
@@ -17,6 +20,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 
 #include <Eigen/Core>
 
@@ -41,13 +45,19 @@ struct RenderOptions {
 
 	/* Background: level at the image centre, gradient across the frame, noise. */
 	double background = 12.0;
-	double gradient = 10.0;		/* levels from one side of the frame to the other */
-	double noise_sigma = 2.0;	/* Gaussian read noise, levels */
+	double gradient = 10.0; /* levels from one side of the frame to the other */
+	double noise_sigma = 2.0; /* Gaussian read noise, levels */
+	/*
+	 * Faster read noise (about 5x) for long evaluations: the sum of four
+	 * uniforms per pixel, scaled to noise_sigma (nearly Gaussian, tails cut
+	 * at 3.5 sigma); a different pattern from the default Box-Muller noise.
+	 */
+	bool fast_noise = false;
 
 	/* Clutter. */
-	int hot_pixels = 0;		/* single saturated pixels */
-	int reflections = 0;		/* LED-like round spots in random places */
-	int glints = 0;			/* long thin bright streaks */
+	int hot_pixels = 0; /* single saturated pixels */
+	int reflections = 0; /* LED-like round spots in random places */
+	int glints = 0; /* long thin bright streaks */
 	/* Occlusion: hide this many randomly chosen visible LEDs ... */
 	int occluded_leds = 0;
 	/* ... or exactly these (bit i hides LED i); applied in addition. */
@@ -66,15 +76,105 @@ struct RenderOptions {
 	 */
 	std::uint64_t clutter_seed = 0;
 	double led_gain = 1.0;
+
+	/*
+	 * Harder scenes (all off by default). Random choices that belong to the
+	 * scene (reflection shapes and places, sunlit patches) follow the scene
+	 * seed; those that belong to the frame (dimmed LEDs, the face kept, the
+	 * blur direction) follow the frame's seed.
+	 */
+
+	/*
+	 * Reflections near the target: this many more LED-like reflections placed
+	 * among and around the LEDs (inside their image's bounding box grown by
+	 * half its size on each side), clear of the LED spots by only
+	 * near_clearance_px beyond both spots' extents, so each is still a blob of
+	 * its own. reflection_squash makes every reflection elliptic (minor/major
+	 * axis drawn in [1 - squash, 1], random orientation), like a foreshortened
+	 * LED; 0 keeps them round.
+	 */
+	int near_reflections = 0;
+	double near_clearance_px = 1.5;
+	double reflection_squash = 0.0;
+
+	/*
+	 * Blooming: overexposed LED spots whose cores clip at 255, each with a
+	 * round soft halo. bloom > 0 turns it on and is the halo's radius (at half
+	 * its level) in multiples of the spot's radius (its largest semi-axis, at
+	 * least the blur sigma); 2-3 is typical. The spot's peak is multiplied by
+	 * bloom_overexposure and made at least 1.5 x 255 (so it always clips);
+	 * bloom_halo_peak is the halo's level above background at its centre.
+	 * With bloom_reflections the LED-like reflections bloom the same way.
+	 */
+	double bloom = 0.0;
+	double bloom_overexposure = 4.0;
+	double bloom_halo_peak = 80.0;
+	bool bloom_reflections = true;
+
+	/*
+	 * Linear motion blur: every LED spot (and halo) smeared uniformly along a
+	 * straight streak of motion_blur_px pixels centred on the LED's position
+	 * (the mid-exposure position, so the truth stays the streak's centre),
+	 * direction motion_blur_angle_deg in the image (0: +u, 90: +v; NaN: random
+	 * per frame). The LED's energy is spread along the streak (its peak
+	 * falls), but no further than min_led_peak (the sensor gain would rise).
+	 * With motion_blur_reflections the reflections streak too (the camera
+	 * moved, not the target).
+	 */
+	double motion_blur_px = 0.0;
+	double motion_blur_angle_deg = std::numeric_limits<double>::quiet_NaN();
+	bool motion_blur_reflections = true;
+
+	/*
+	 * Dimmed LEDs: this many randomly chosen drawn LEDs, plus those of
+	 * dim_mask, shine at a brightness factor drawn per LED in [dim_min,
+	 * dim_max] (after the floor at min_led_peak: a weak LED, same gain).
+	 */
+	int dimmed_leds = 0;
+	std::uint32_t dim_mask = 0;
+	double dim_min = 0.25;
+	double dim_max = 0.40;
+
+	/*
+	 * Sunlit patches: large, smooth, bright regions (soft-edged ellipses of
+	 * 6-25% of the frame's larger side per semi-axis, a smooth edge 15 px to
+	 * half the minor semi-axis wide) whose level above background is drawn in
+	 * [sun_peak_min, sun_peak_max]; above 255 they saturate in their middle.
+	 * They may lie over the target: an LED whose background there leaves it
+	 * less than half its contrast below 255 is washed out (not counted as
+	 * drawn, see RenderTruth::washed_out_mask). Strong gradients: `gradient`.
+	 */
+	int sun_patches = 0;
+	double sun_peak_min = 60.0;
+	double sun_peak_max = 320.0;
+
+	/*
+	 * Occlusion of all but one face: every LED not on the kept face is
+	 * hidden. keep_face >= 0 keeps that face; one_face_only keeps a random
+	 * face among those whose four LEDs are drawable (the one with the most
+	 * drawable LEDs when none is complete). Applied before occluded_leds.
+	 */
+	bool one_face_only = false;
+	int keep_face = -1;
+
+	/* Target-free frame: no LED is drawn, only the scene; clutter may be anywhere. */
+	bool draw_target = true;
 };
 
 struct RenderTruth {
 	Pose pose;
 	/* Ideal (noise-free) image position of every LED, and whether it was drawn. */
 	StaticVector<Eigen::Vector2d, kMaxLeds> led_px;
-	std::uint32_t visible_mask = 0;	 /* LEDs drawn in the frame */
+	std::uint32_t visible_mask = 0; /* LEDs drawn in the frame */
 	std::uint32_t occluded_mask = 0; /* LEDs hidden by occlusion */
-	int clutter_blobs = 0;		 /* reflections + glints drawn */
+	int clutter_blobs = 0; /* reflections + glints drawn */
+	/* LEDs dimmed, and drawn but lost in a saturated sunlit patch (not in visible_mask). */
+	std::uint32_t dimmed_mask = 0;
+	std::uint32_t washed_out_mask = 0;
+	int kept_face = -1; /* the face kept by one-face occlusion, else -1 */
+	double motion_blur_angle_deg = 0.0; /* the streak's direction, when blurred */
+	int sun_patches = 0; /* sunlit patches drawn */
+	bool target_drawn = true; /* false on a target-free frame */
 };
 
 class FrameRenderer
@@ -105,5 +205,46 @@ private:
  */
 Pose poseAt(const CameraIntrinsics &camera, const TargetModel &target, double range_mm,
 	    const Eigen::Vector3d &rpy_deg, double u_frac = 0.5, double v_frac = 0.5);
+
+/*
+ * A view of the target from one side, inside the emission cone of one face:
+ * the camera sits on the line from the face's centre along a direction at
+ * angle_deg from the face's front normal (TargetModel::frontNormals) and at
+ * azimuth_deg about it (measured from the normal's unitOrthogonal(), towards
+ * normal x unitOrthogonal()); it is rolled by roll_deg about its line of
+ * sight to the face's centre, which lands at (u_frac, v_frac) of the frame.
+ */
+struct SideView {
+	int face = 0;
+	double angle_deg = 0.0;
+	double azimuth_deg = 0.0;
+	double roll_deg = 0.0;
+	double u_frac = 0.5, v_frac = 0.5;
+};
+
+/* The pose of a SideView with the camera range_mm from the face's centre. */
+Pose poseFromSide(const CameraIntrinsics &camera, const TargetModel &target, double range_mm,
+		  const SideView &view);
+
+/*
+ * Draw a view of face `face` from range_mm: the direction uniform over the
+ * cone (in solid angle) up to max_angle_deg from the face's front normal, a
+ * uniform roll, and the face's centre anywhere in the frame such that every
+ * LED of the target projects at least margin_px inside it (and in front of
+ * the camera). Returns false when no placement fits after a number of
+ * attempts (the target too large for the frame at this range); *pose is then
+ * the last attempt, with the face's centre in the frame's centre.
+ * Deterministic for a seed. Allocates: never.
+ */
+bool sampleSideView(const CameraIntrinsics &camera, const TargetModel &target, int face,
+		    double range_mm, double max_angle_deg, std::uint64_t seed, Pose *pose,
+		    SideView *view = nullptr, double margin_px = 4.0);
+
+/*
+ * Whether every LED of the target projects in front of the camera, at least
+ * margin_px inside the frame and inside the lens's valid field.
+ */
+bool targetInFrame(const CameraModel &camera, const TargetModel &target, const Pose &pose,
+		   double margin_px);
 
 } /* namespace dockpose */
