@@ -2,72 +2,416 @@
 #include "algo/synth/evaluation.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <random>
 
 namespace dockpose {
 
-EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &camera, const PipelineConfig &pipeline_config,
-			 const EvaluationConfig &config,
+namespace {
+
+std::uint64_t splitmix64(std::uint64_t x)
+{
+	x += 0x9e3779b97f4a7c15ULL;
+	x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+	x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+	return x ^ (x >> 31);
+}
+
+/* A deterministic stream (mt19937_64 with our own transforms: the same on every library). */
+class Rng
+{
+public:
+	explicit Rng(std::uint64_t seed)
+		: engine_(seed)
+	{
+	}
+
+	double uniform() { return static_cast<double>(engine_() >> 11) * 0x1.0p-53; }
+	double uniform(double a, double b) { return a + (b - a) * uniform(); }
+	/* Uniform integer in [0, n), n > 0. */
+	int index(int n) { return std::min(n - 1, static_cast<int>(uniform() * n)); }
+	bool chance(double p) { return uniform() < p; }
+	std::uint64_t next() { return engine_(); }
+
+private:
+	std::mt19937_64 engine_;
+};
+
+struct ScenarioInfo {
+	Scenario scenario;
+	const char *name;
+};
+
+constexpr ScenarioInfo kScenarios[] = {
+	{ Scenario::Legacy, "legacy" },
+	{ Scenario::Clean, "clean" },
+	{ Scenario::Cluttered, "cluttered" },
+	{ Scenario::HeavyClutter, "heavy-clutter" },
+	{ Scenario::Bloom, "bloom" },
+	{ Scenario::Blur, "blur" },
+	{ Scenario::Dim, "dim" },
+	{ Scenario::Sunlit, "sunlit" },
+	{ Scenario::OneFace, "one-face" },
+	{ Scenario::TwoHidden, "two-hidden" },
+	{ Scenario::TargetFree, "target-free" },
+	{ Scenario::Combined, "combined" },
+	{ Scenario::Mix, "mix" },
+};
+
+/* Light clutter under every effect: the legacy amounts. */
+void lightClutter(Rng &r, RenderOptions *o)
+{
+	o->reflections = r.index(9);
+	o->glints = r.index(3);
+	o->hot_pixels = r.index(30);
+}
+
+/* 12-30 LED-like reflections, a quarter to a half of them near the target, elliptic. */
+void heavyClutter(Rng &r, RenderOptions *o)
+{
+	const int n = 12 + r.index(19);
+	const int near = static_cast<int>(std::lround(n * r.uniform(0.25, 0.5)));
+	o->reflections = n - near;
+	o->near_reflections = near;
+	o->reflection_squash = 0.5;
+	o->glints = 2 + r.index(5);
+	o->hot_pixels = r.index(61);
+}
+
+void bloom(Rng &r, RenderOptions *o)
+{
+	o->bloom = r.uniform(2.0, 3.0);
+	o->bloom_overexposure = r.uniform(3.0, 8.0);
+	o->bloom_halo_peak = r.uniform(40.0, 120.0);
+}
+
+void motionBlur(Rng &r, RenderOptions *o)
+{
+	o->motion_blur_px = r.uniform(3.0, 12.0);
+	o->motion_blur_reflections = r.chance(0.5); /* camera or target motion */
+}
+
+void dim(Rng &r, RenderOptions *o)
+{
+	o->dimmed_leds = 1 + r.index(2);
+}
+
+void sunlit(Rng &r, RenderOptions *o)
+{
+	o->sun_patches = 1 + r.index(3);
+	o->background = r.uniform(15.0, 50.0);
+	o->gradient = r.uniform(60.0, 200.0);
+}
+
+/* The legacy frame's render options (the draws in their historical order). */
+template<typename Uniform>
+RenderOptions legacyOptions(bool clutter, Uniform &&unit)
+{
+	RenderOptions o;
+	o.noise_sigma = 1.0 + 2.0 * unit();
+	o.gradient = 30.0 * unit();
+	if (clutter) {
+		o.reflections = static_cast<int>(9 * unit());
+		o.glints = static_cast<int>(3 * unit());
+		o.hot_pixels = static_cast<int>(30 * unit());
+		o.occluded_leds = unit() < 0.5 ? 1 : 0;
+	}
+	return o;
+}
+
+std::uint32_t faceMask(const TargetModel &target, std::size_t f)
+{
+	std::uint32_t m = 0;
+	for (int v : target.faces[f])
+		m |= 1u << v;
+	return m;
+}
+
+} /* namespace */
+
+const char *scenarioName(Scenario scenario)
+{
+	for (const ScenarioInfo &info : kScenarios)
+		if (info.scenario == scenario)
+			return info.name;
+	return "unknown";
+}
+
+bool parseScenario(const std::string &name, Scenario *scenario)
+{
+	for (const ScenarioInfo &info : kScenarios)
+		if (name == info.name) {
+			*scenario = info.scenario;
+			return true;
+		}
+	return false;
+}
+
+void accumulate(ScenarioTally *a, const ScenarioTally &b)
+{
+	a->frames += b.frames;
+	a->target_free += b.target_free;
+	a->face_complete += b.face_complete;
+	a->found += b.found;
+	a->correct += b.correct;
+	a->wrong += b.wrong;
+	a->face_complete_correct += b.face_complete_correct;
+	for (int k = 0; k < kStatusSlots; ++k)
+		a->misses[k] += b.misses[k];
+	a->face_complete_wrong += b.face_complete_wrong;
+	a->target_free_wrong += b.target_free_wrong;
+}
+
+RenderOptions scenarioOptions(Scenario scenario, std::uint64_t seed)
+{
+	Rng r(splitmix64(seed ^ 0x7363656eULL));
+	RenderOptions o;
+	o.noise_sigma = r.uniform(1.0, 3.0);
+	o.gradient = r.uniform(0.0, 30.0);
+	switch (scenario) {
+	case Scenario::Legacy:
+	case Scenario::Mix:
+	case Scenario::Clean:
+		break;
+	case Scenario::Cluttered:
+		lightClutter(r, &o);
+		o.occluded_leds = r.chance(0.5) ? 1 : 0;
+		break;
+	case Scenario::HeavyClutter:
+		heavyClutter(r, &o);
+		o.occluded_leds = r.chance(0.3) ? 1 : 0;
+		break;
+	case Scenario::Bloom:
+		lightClutter(r, &o);
+		bloom(r, &o);
+		break;
+	case Scenario::Blur:
+		lightClutter(r, &o);
+		motionBlur(r, &o);
+		break;
+	case Scenario::Dim:
+		lightClutter(r, &o);
+		dim(r, &o);
+		break;
+	case Scenario::Sunlit:
+		lightClutter(r, &o);
+		sunlit(r, &o);
+		break;
+	case Scenario::OneFace:
+		lightClutter(r, &o);
+		o.one_face_only = true;
+		break;
+	case Scenario::TwoHidden:
+		lightClutter(r, &o);
+		o.occluded_leds = 2;
+		break;
+	case Scenario::TargetFree: {
+		o.draw_target = false;
+		const int n = r.index(31);
+		const int near = static_cast<int>(std::lround(n * r.uniform(0.0, 0.5)));
+		o.reflections = n - near;
+		o.near_reflections = near;
+		o.reflection_squash = 0.5;
+		o.glints = r.index(7);
+		o.hot_pixels = r.index(61);
+		if (r.chance(0.3))
+			sunlit(r, &o);
+		if (r.chance(0.3))
+			bloom(r, &o);
+		if (r.chance(0.3))
+			motionBlur(r, &o);
+		break;
+	}
+	case Scenario::Combined: {
+		heavyClutter(r, &o);
+		if (r.chance(0.35))
+			bloom(r, &o);
+		if (r.chance(0.35))
+			motionBlur(r, &o);
+		if (r.chance(0.35))
+			dim(r, &o);
+		if (r.chance(0.35))
+			sunlit(r, &o);
+		o.blur_sigma_px = r.uniform(0.6, 1.4);
+		switch (r.index(4)) {
+		case 1:
+			o.occluded_leds = 1;
+			break;
+		case 2:
+			o.occluded_leds = 2;
+			break;
+		case 3:
+			o.one_face_only = true;
+			break;
+		default:
+			break;
+		}
+		break;
+	}
+	}
+	return o;
+}
+
+EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &camera,
+			 const PipelineConfig &pipeline_config, const EvaluationConfig &config,
 			 const std::function<void(const FrameOutcome &, const Image &)> &on_frame)
 {
 	FrameRenderer renderer(target, camera);
 	Pipeline pipeline(target, camera, pipeline_config);
+	/* The legacy stream: its draws, in their order, make the historical frames. */
 	std::mt19937_64 rng(config.seed);
 	std::uniform_real_distribution<double> unit(0.0, 1.0);
-	auto symmetric = [&](double a) { return a * (2.0 * unit(rng) - 1.0); };
+	auto uniform = [&]() {
+		return unit(rng);
+	};
+	auto symmetric = [&](double a) {
+		return a * (2.0 * unit(rng) - 1.0);
+	};
+	const bool legacy_frames = config.scenario == Scenario::Legacy && !config.any_side;
+	const int n_faces = static_cast<int>(target.faces.size());
+
+	/* Mix: every scenario but Legacy, target-free weighted. */
+	std::array<double, kScenarioCount> mix_weight{};
+	double mix_total = 0.0;
+	for (int s = 1; s < kScenarioCount; ++s) {
+		mix_weight[s] = static_cast<Scenario>(s) == Scenario::TargetFree
+					? std::max(0.0, config.mix_target_free_weight)
+					: 1.0;
+		mix_total += mix_weight[s];
+	}
+
 	Image frame;
 	EvaluationTally tally;
 	for (int i = 0; i < config.frames; ++i) {
-		/* Log-uniform range; the target anywhere it fits, nearer the centre when close. */
-		const double range =
-			config.min_range_mm * std::pow(config.max_range_mm / config.min_range_mm, unit(rng));
-		const Eigen::Vector3d rpy{ symmetric(config.max_angle_deg), symmetric(config.max_angle_deg),
-					   symmetric(config.max_angle_deg) };
-		const double spread = std::min(0.3, 0.3 * range / config.max_range_mm + 0.05);
 		FrameOutcome out;
 		out.index = i;
-		out.range_mm = range;
-		out.truth = poseAt(camera, target, range, rpy, 0.5 + symmetric(spread), 0.5 + symmetric(spread));
-
 		RenderOptions o;
-		o.noise_sigma = 1.0 + 2.0 * unit(rng);
-		o.gradient = 30.0 * unit(rng);
-		if (config.clutter) {
-			o.reflections = static_cast<int>(9 * unit(rng));
-			o.glints = static_cast<int>(3 * unit(rng));
-			o.hot_pixels = static_cast<int>(30 * unit(rng));
-			o.occluded_leds = unit(rng) < 0.5 ? 1 : 0;
+		const std::uint64_t render_seed =
+			config.seed * 1000003u + static_cast<std::uint64_t>(i);
+		if (legacy_frames) {
+			/* Log-uniform range; the target anywhere it fits, nearer the centre when close. */
+			const double range =
+				config.min_range_mm *
+				std::pow(config.max_range_mm / config.min_range_mm, unit(rng));
+			const Eigen::Vector3d rpy{ symmetric(config.max_angle_deg),
+						   symmetric(config.max_angle_deg),
+						   symmetric(config.max_angle_deg) };
+			const double spread =
+				std::min(0.3, 0.3 * range / config.max_range_mm + 0.05);
+			out.range_mm = range;
+			out.truth = poseAt(camera, target, range, rpy, 0.5 + symmetric(spread),
+					   0.5 + symmetric(spread));
+			o = legacyOptions(config.clutter, uniform);
+		} else {
+			/* One stream per frame: a frame is the same whatever came before it. */
+			Rng r(splitmix64(config.seed * 0x9e3779b97f4a7c15ULL +
+					 static_cast<std::uint64_t>(i)));
+			Scenario scenario = config.scenario;
+			if (scenario == Scenario::Mix) {
+				double pick = r.uniform(0.0, mix_total);
+				scenario = Scenario::Clean;
+				for (int s = 1; s < kScenarioCount; ++s) {
+					if (pick < mix_weight[s]) {
+						scenario = static_cast<Scenario>(s);
+						break;
+					}
+					pick -= mix_weight[s];
+				}
+			}
+			out.scenario = scenario;
+			const double range =
+				config.min_range_mm *
+				std::pow(config.max_range_mm / config.min_range_mm, r.uniform());
+			out.range_mm = range;
+			if (config.any_side && n_faces > 0) {
+				SideView view;
+				const int face = r.index(n_faces);
+				out.in_frame = sampleSideView(camera, target, face, range,
+							      config.side_max_angle_deg, r.next(),
+							      &out.truth, &view);
+				out.view_face = face;
+				out.view_angle_deg = view.angle_deg;
+			} else {
+				const double a = config.max_angle_deg;
+				const Eigen::Vector3d rpy{ r.uniform(-a, a), r.uniform(-a, a),
+							   r.uniform(-a, a) };
+				const double spread =
+					std::min(0.3, 0.3 * range / config.max_range_mm + 0.05);
+				out.truth = poseAt(camera, target, range, rpy,
+						   0.5 + r.uniform(-spread, spread),
+						   0.5 + r.uniform(-spread, spread));
+			}
+			const std::uint64_t option_seed = r.next();
+			if (scenario == Scenario::Legacy) {
+				o = legacyOptions(config.clutter, [&]() { return r.uniform(); });
+			} else {
+				o = scenarioOptions(scenario, option_seed);
+				o.fast_noise = config.fast_noise;
+			}
 		}
-		renderer.render(out.truth, o, config.seed * 1000003u + static_cast<std::uint64_t>(i), &frame,
-				&out.render);
+
+		renderer.render(out.truth, o, render_seed, &frame, &out.render);
 		if (!config.track)
 			pipeline.reset();
 		const PoseResult &r = pipeline.process(frame.view());
 		out.result = &r;
+		out.target_free = !out.render.target_drawn;
+		for (int f = 0; f < n_faces && !out.face_complete; ++f) {
+			const std::uint32_t m = faceMask(target, static_cast<std::size_t>(f));
+			out.face_complete = (out.render.visible_mask & m) == m;
+		}
+
 		++tally.frames;
-		const bool solvable = __builtin_popcount(out.render.visible_mask) >= config.min_visible_leds;
+		const bool solvable = std::popcount(out.render.visible_mask) >=
+				      config.min_visible_leds;
 		tally.solvable += solvable ? 1 : 0;
+		ScenarioTally &st = tally.scenarios[static_cast<int>(out.scenario)];
+		++st.frames;
+		st.target_free += out.target_free ? 1 : 0;
+		st.face_complete += out.face_complete ? 1 : 0;
 		if (r.found) {
 			++tally.found;
+			++st.found;
 			out.rot_err_deg = rotationAngleDeg(out.truth.R, r.R);
 			out.trans_err_mm = (out.truth.t_mm - r.t_mm).norm();
-			out.correct = out.rot_err_deg <= config.max_rot_err_deg &&
-				      out.trans_err_mm <= std::max(config.min_trans_err_mm,
-								   config.trans_err_frac * out.truth.t_mm.norm());
+			out.correct =
+				!out.target_free && out.rot_err_deg <= config.max_rot_err_deg &&
+				out.trans_err_mm <=
+					std::max(config.min_trans_err_mm,
+						 config.trans_err_frac * out.truth.t_mm.norm());
+			out.wrong = !out.correct;
 			if (out.correct) {
 				++tally.correct;
+				++st.correct;
 				tally.solvable_correct += solvable ? 1 : 0;
-				tally.worst_rot_err_deg = std::max(tally.worst_rot_err_deg, out.rot_err_deg);
+				tally.worst_rot_err_deg =
+					std::max(tally.worst_rot_err_deg, out.rot_err_deg);
 				tally.worst_trans_err_frac =
-					std::max(tally.worst_trans_err_frac, out.trans_err_mm / out.truth.t_mm.norm());
+					std::max(tally.worst_trans_err_frac,
+						 out.trans_err_mm / out.truth.t_mm.norm());
 			} else {
 				++tally.wrong;
+				++st.wrong;
+				st.target_free_wrong += out.target_free ? 1 : 0;
 			}
+		}
+		if (out.face_complete) {
+			if (out.correct)
+				++st.face_complete_correct;
+			else if (r.found)
+				++st.face_complete_wrong;
+			else
+				++st.misses[std::min(static_cast<int>(r.status), kStatusSlots - 1)];
 		}
 		if (on_frame)
 			on_frame(out, frame);
 	}
+	for (const ScenarioTally &st : tally.scenarios)
+		accumulate(&tally.total, st);
+	tally.face_complete = tally.total.face_complete;
+	tally.face_complete_correct = tally.total.face_complete_correct;
+	tally.target_free = tally.total.target_free;
 	return tally;
 }
 

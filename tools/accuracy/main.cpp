@@ -1,15 +1,24 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * dockpose-accuracy: the acceptance figures. Renders thousands of frames with
- * known truth (clutter, a hidden LED), solves each one cold (or tracking),
- * and prints found / correct / wrong rates and error statistics per range
- * bin; --csv writes one line per frame for plotting (scripts/plot-accuracy).
+ * known truth, solves each one cold (or tracking), and prints found / correct
+ * / wrong rates and error statistics per range bin, then per scenario: frames,
+ * face-complete frames (some face with all four LEDs drawn) and the correct
+ * poses among them, wrong poses (on target-free frames every pose is wrong)
+ * and the misses by pipeline status. --scenario picks the scenes (legacy: the
+ * historical clutter and a hidden LED, or --clean; mix: one scenario drawn
+ * per frame), --any-side the poses (any face, from inside its emission
+ * cone); --csv writes one line per frame for plotting (scripts/plot-accuracy),
+ * --json a summary. Exit status 1 when any pose was wrong.
  */
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -19,25 +28,124 @@
 
 using namespace dockpose;
 
+namespace {
+
+std::vector<std::string> splitList(const std::string &text)
+{
+	std::vector<std::string> out;
+	std::stringstream ss(text);
+	std::string item;
+	while (std::getline(ss, item, ','))
+		if (!item.empty())
+			out.push_back(item);
+	return out;
+}
+
+double percent(int a, int b)
+{
+	return b > 0 ? 100.0 * a / b : 0.0;
+}
+
+/* "no_match 3, ambiguous 1" (misses of face-complete frames), or "-". */
+std::string missText(const ScenarioTally &t)
+{
+	std::string s;
+	for (int k = 0; k < kStatusSlots; ++k) {
+		if (t.misses[k] == 0)
+			continue;
+		if (!s.empty())
+			s += ", ";
+		s += poseStatusName(static_cast<PoseStatus>(k));
+		s += ' ';
+		s += std::to_string(t.misses[k]);
+	}
+	return s.empty() ? "-" : s;
+}
+
+void jsonTally(std::ostream &os, const ScenarioTally &t)
+{
+	os << "{ \"frames\": " << t.frames << ", \"face_complete\": " << t.face_complete
+	   << ", \"face_complete_correct\": " << t.face_complete_correct
+	   << ", \"face_complete_correct_percent\": "
+	   << percent(t.face_complete_correct, t.face_complete) << ", \"found\": " << t.found
+	   << ", \"correct\": " << t.correct << ", \"wrong\": " << t.wrong
+	   << ", \"target_free\": " << t.target_free
+	   << ", \"target_free_wrong\": " << t.target_free_wrong
+	   << ", \"face_complete_wrong\": " << t.face_complete_wrong << ", \"misses\": {";
+	bool first = true;
+	for (int k = 0; k < kStatusSlots; ++k) {
+		if (t.misses[k] == 0)
+			continue;
+		os << (first ? " " : ", ") << '"' << poseStatusName(static_cast<PoseStatus>(k))
+		   << "\": " << t.misses[k];
+		first = false;
+	}
+	os << (first ? "}" : " }") << " }";
+}
+
+} /* namespace */
+
 int main(int argc, char **argv)
 {
-	CLI::App app{ "dockpose-accuracy: pose accuracy and robustness on rendered frames with known truth" };
-	std::string target_path, camera_path, csv_path;
+	CLI::App app{
+		"dockpose-accuracy: pose accuracy and robustness on rendered frames with known truth"
+	};
+	std::string target_path, camera_path, csv_path, json_path, scenario_list = "legacy";
 	EvaluationConfig e;
 	e.frames = 1000;
-	bool clean = false;
+	bool clean = false, exact_noise = false;
 	app.add_option("--target", target_path, "target model JSON")->required();
 	app.add_option("--camera", camera_path, "camera JSON")->required();
-	app.add_option("--frames", e.frames, "frames to render and solve")->check(CLI::Range(1, 10000000));
-	app.add_option("--seed", e.seed, "random seed");
-	app.add_option("--min-range-mm", e.min_range_mm, "nearest range")->check(CLI::PositiveNumber);
-	app.add_option("--max-range-mm", e.max_range_mm, "farthest range")->check(CLI::PositiveNumber);
-	app.add_option("--max-angle-deg", e.max_angle_deg, "roll, pan, tilt drawn in ±this")->check(CLI::Range(0.0, 80.0));
-	app.add_flag("--clean", clean, "no clutter and no occlusion");
+	app.add_option("--frames", e.frames, "frames to render and solve (per scenario listed)")
+		->check(CLI::Range(1, 10000000));
+	app.add_option("--seed", e.seed, "random seed (the k-th scenario listed uses seed + k)");
+	app.add_option("--min-range-mm", e.min_range_mm, "nearest range")
+		->check(CLI::PositiveNumber);
+	app.add_option("--max-range-mm", e.max_range_mm, "farthest range")
+		->check(CLI::PositiveNumber);
+	app.add_option("--max-angle-deg", e.max_angle_deg, "roll, pan, tilt drawn in ±this")
+		->check(CLI::Range(0.0, 80.0));
+	app.add_flag("--clean", clean, "legacy scenario: no clutter and no occlusion");
 	app.add_flag("--track", e.track, "track between frames instead of solving each frame cold");
+	app.add_option(
+		"--scenario", scenario_list,
+		"comma-separated scenarios, each run for --frames frames: legacy, clean, cluttered, "
+		"heavy-clutter, bloom, blur, dim, sunlit, one-face, two-hidden, target-free, "
+		"combined, mix (one of the others drawn per frame)");
+	app.add_flag(
+		"--any-side", e.any_side,
+		"look at a random face from inside its emission cone, any roll, the target anywhere "
+		"in the frame (range: to that face's centre)");
+	app.add_option(
+		   "--side-max-angle-deg", e.side_max_angle_deg,
+		   "with --any-side: largest angle between the line of sight and the face's normal")
+		->check(CLI::Range(0.0, 89.0));
+	app.add_option("--target-free-weight", e.mix_target_free_weight,
+		       "mix: weight of target-free frames (others weigh 1)")
+		->check(CLI::Range(0.0, 100.0));
+	app.add_flag(
+		"--exact-noise", exact_noise,
+		"new scenarios: the renderer's exact Gaussian read noise (slower) instead of the fast one");
 	app.add_option("--csv", csv_path, "write one line per frame");
+	app.add_option("--json", json_path, "write a summary (per scenario and totals) as JSON");
 	CLI11_PARSE(app, argc, argv);
 	e.clutter = !clean;
+	e.fast_noise = !exact_noise;
+
+	std::vector<Scenario> scenarios;
+	for (const std::string &name : splitList(scenario_list)) {
+		Scenario s;
+		if (!parseScenario(name, &s)) {
+			std::fprintf(stderr, "dockpose-accuracy: unknown scenario '%s'\n",
+				     name.c_str());
+			return 2;
+		}
+		scenarios.push_back(s);
+	}
+	if (scenarios.empty()) {
+		std::fprintf(stderr, "dockpose-accuracy: --scenario names no scenario\n");
+		return 2;
+	}
 
 	const auto target = loadTargetModel(target_path);
 	if (!target) {
@@ -54,14 +162,17 @@ int main(int argc, char **argv)
 	if (!csv_path.empty()) {
 		csv.open(csv_path);
 		if (!csv) {
-			std::fprintf(stderr, "dockpose-accuracy: cannot write %s\n", csv_path.c_str());
+			std::fprintf(stderr, "dockpose-accuracy: cannot write %s\n",
+				     csv_path.c_str());
 			return 2;
 		}
 		csv << "frame,range_mm,found,correct,status,leds,visible,rms_px,rot_err_deg,trans_err_mm,"
-		       "ex_mm,ey_mm,ez_mm,sigma_x_mm,sigma_y_mm,sigma_z_mm,clutter\n";
+		       "ex_mm,ey_mm,ez_mm,sigma_x_mm,sigma_y_mm,sigma_z_mm,clutter,"
+		       "scenario,face_complete,target_free,wrong,view_face,view_angle_deg,in_frame,"
+		       "log10_nfa\n";
 	}
 
-	/* Per range bin (log-spaced): errors of found poses. */
+	/* Per range bin (log-spaced): errors of found poses on frames with the target. */
 	struct Bin {
 		int frames = 0, found = 0, wrong = 0;
 		std::vector<double> rot, trans, z;
@@ -69,33 +180,62 @@ int main(int argc, char **argv)
 	std::map<int, Bin> bins;
 	const double bin_ratio = std::pow(e.max_range_mm / e.min_range_mm, 1.0 / 6.0);
 	auto binOf = [&](double range) {
-		return std::clamp(static_cast<int>(std::log(range / e.min_range_mm) / std::log(bin_ratio)), 0, 5);
+		return std::clamp(
+			static_cast<int>(std::log(range / e.min_range_mm) / std::log(bin_ratio)), 0,
+			5);
 	};
 
-	const EvaluationTally t = evaluate(target.value, camera.value, PipelineConfig{}, e,
-					   [&](const FrameOutcome &f, const Image &) {
-						   Bin &b = bins[binOf(f.range_mm)];
-						   ++b.frames;
-						   const PoseResult &r = *f.result;
-						   if (r.found) {
-							   ++b.found;
-							   b.wrong += f.correct ? 0 : 1;
-							   b.rot.push_back(f.rot_err_deg);
-							   b.trans.push_back(f.trans_err_mm);
-							   b.z.push_back(std::abs(f.truth.t_mm.z() - r.t_mm.z()));
-						   }
-						   if (csv.is_open()) {
-							   const Eigen::Vector3d d = r.t_mm - f.truth.t_mm;
-							   csv << f.index << ',' << f.range_mm << ',' << r.found << ','
-							       << f.correct << ',' << poseStatusName(r.status) << ','
-							       << r.leds_used << ','
-							       << __builtin_popcount(f.render.visible_mask) << ','
-							       << r.rms_px << ',' << f.rot_err_deg << ',' << f.trans_err_mm
-							       << ',' << d.x() << ',' << d.y() << ',' << d.z() << ','
-							       << r.sigma_t_mm.x() << ',' << r.sigma_t_mm.y() << ','
-							       << r.sigma_t_mm.z() << ',' << f.render.clutter_blobs << '\n';
-						   }
-					   });
+	auto onFrame = [&](const FrameOutcome &f, const Image &) {
+		const PoseResult &r = *f.result;
+		if (!f.target_free) {
+			Bin &b = bins[binOf(f.range_mm)];
+			++b.frames;
+			if (r.found) {
+				++b.found;
+				b.wrong += f.correct ? 0 : 1;
+				b.rot.push_back(f.rot_err_deg);
+				b.trans.push_back(f.trans_err_mm);
+				b.z.push_back(std::abs(f.truth.t_mm.z() - r.t_mm.z()));
+			}
+		}
+		if (csv.is_open()) {
+			const Eigen::Vector3d d = r.t_mm - f.truth.t_mm;
+			csv << f.index << ',' << f.range_mm << ',' << r.found << ',' << f.correct
+			    << ',' << poseStatusName(r.status) << ',' << r.leds_used << ','
+			    << __builtin_popcount(f.render.visible_mask) << ',' << r.rms_px << ','
+			    << f.rot_err_deg << ',' << f.trans_err_mm << ',' << d.x() << ','
+			    << d.y() << ',' << d.z() << ',' << r.sigma_t_mm.x() << ','
+			    << r.sigma_t_mm.y() << ',' << r.sigma_t_mm.z() << ','
+			    << f.render.clutter_blobs << ',' << scenarioName(f.scenario) << ','
+			    << f.face_complete << ',' << f.target_free << ',' << f.wrong << ','
+			    << f.view_face << ',' << f.view_angle_deg << ',' << f.in_frame << ','
+			    << r.log10_nfa << '\n';
+		}
+	};
+
+	const auto start = std::chrono::steady_clock::now();
+	EvaluationTally t;
+	std::array<ScenarioTally, kScenarioCount> per{};
+	for (std::size_t k = 0; k < scenarios.size(); ++k) {
+		EvaluationConfig ek = e;
+		ek.scenario = scenarios[k];
+		ek.seed = e.seed + k;
+		const EvaluationTally tk =
+			evaluate(target.value, camera.value, PipelineConfig{}, ek, onFrame);
+		t.frames += tk.frames;
+		t.found += tk.found;
+		t.correct += tk.correct;
+		t.wrong += tk.wrong;
+		t.solvable += tk.solvable;
+		t.solvable_correct += tk.solvable_correct;
+		t.worst_rot_err_deg = std::max(t.worst_rot_err_deg, tk.worst_rot_err_deg);
+		t.worst_trans_err_frac = std::max(t.worst_trans_err_frac, tk.worst_trans_err_frac);
+		for (int s = 0; s < kScenarioCount; ++s)
+			accumulate(&per[s], tk.scenarios[s]);
+		accumulate(&t.total, tk.total);
+	}
+	const double seconds =
+		std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
 	auto median = [](std::vector<double> v) {
 		if (v.empty())
@@ -103,21 +243,88 @@ int main(int argc, char **argv)
 		std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
 		return v[v.size() / 2];
 	};
-	auto maxOf = [](const std::vector<double> &v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); };
+	auto maxOf = [](const std::vector<double> &v) {
+		return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end());
+	};
 
-	std::printf("target %s, camera %dx%d, %d frames, %s, %s\n", target.value.name.c_str(), camera.value.width,
-		    camera.value.height, t.frames, e.clutter ? "clutter + occlusion" : "clean",
+	std::string what;
+	for (Scenario s : scenarios) {
+		if (!what.empty())
+			what += ",";
+		what += s == Scenario::Legacy ? (e.clutter ? "clutter + occlusion" : "clean")
+					      : scenarioName(s);
+	}
+	std::printf("target %s, camera %dx%d, %d frames, %s, %s, %s\n", target.value.name.c_str(),
+		    camera.value.width, camera.value.height, t.frames, what.c_str(),
+		    e.any_side ? "any side" : "legacy poses",
 		    e.track ? "tracking" : "each frame cold");
-	std::printf("%-17s %7s %7s %6s %12s %12s %12s %12s\n", "range mm", "frames", "found%", "wrong",
-		    "rot med °", "rot max °", "|t| med mm", "|z| med mm");
+	std::printf("%-17s %7s %7s %6s %12s %12s %12s %12s\n", "range mm", "frames", "found%",
+		    "wrong", "rot med °", "rot max °", "|t| med mm", "|z| med mm");
 	for (const auto &[index, b] : bins) {
 		const double lo = e.min_range_mm * std::pow(bin_ratio, index);
-		std::printf("%7.0f - %7.0f %7d %6.1f%% %6d %12.3f %12.3f %12.2f %12.2f\n", lo, lo * bin_ratio, b.frames,
-			    100.0 * b.found / std::max(1, b.frames), b.wrong, median(b.rot), maxOf(b.rot),
-			    median(b.trans), median(b.z));
+		std::printf("%7.0f - %7.0f %7d %6.1f%% %6d %12.3f %12.3f %12.2f %12.2f\n", lo,
+			    lo * bin_ratio, b.frames, 100.0 * b.found / std::max(1, b.frames),
+			    b.wrong, median(b.rot), maxOf(b.rot), median(b.trans), median(b.z));
 	}
-	std::printf("correct %d of %d (%.2f%%), found %d, wrong %d; worst correct: %.2f°, %.2f%% of range\n", t.correct,
-		    t.frames, 100.0 * t.correct / std::max(1, t.frames), t.found, t.wrong, t.worst_rot_err_deg,
-		    100.0 * t.worst_trans_err_frac);
+
+	std::printf("\n%-14s %7s %9s %9s %8s %6s %11s  %s\n", "scenario", "frames", "complete",
+		    "correct", "correct%", "wrong", "free/wrong", "misses of face-complete frames");
+	auto row = [&](const char *name, const ScenarioTally &s) {
+		char free_text[32];
+		std::snprintf(free_text, sizeof(free_text), "%d/%d", s.target_free,
+			      s.target_free_wrong);
+		std::string misses = missText(s);
+		if (s.face_complete_wrong > 0)
+			misses += ", wrong " + std::to_string(s.face_complete_wrong);
+		std::printf("%-14s %7d %9d %9d %7.2f%% %6d %11s  %s\n", name, s.frames,
+			    s.face_complete, s.face_complete_correct,
+			    percent(s.face_complete_correct, s.face_complete), s.wrong, free_text,
+			    misses.c_str());
+	};
+	for (int s = 0; s < kScenarioCount; ++s)
+		if (per[s].frames > 0)
+			row(scenarioName(static_cast<Scenario>(s)), per[s]);
+	row("total", t.total);
+	std::printf(
+		"correct %d of %d (%.2f%%), found %d, wrong %d; worst correct: %.2f°, %.2f%% of range\n",
+		t.correct, t.frames, 100.0 * t.correct / std::max(1, t.frames), t.found, t.wrong,
+		t.worst_rot_err_deg, 100.0 * t.worst_trans_err_frac);
+	std::printf("face-complete frames correct: %d of %d (%.2f%%); %.1f s, %.1f frames/s\n",
+		    t.total.face_complete_correct, t.total.face_complete,
+		    percent(t.total.face_complete_correct, t.total.face_complete), seconds,
+		    t.frames / std::max(1e-9, seconds));
+
+	if (!json_path.empty()) {
+		std::ofstream js(json_path);
+		if (!js) {
+			std::fprintf(stderr, "dockpose-accuracy: cannot write %s\n",
+				     json_path.c_str());
+			return 2;
+		}
+		js << "{\n  \"target\": \"" << target.value.name << "\", \"camera\": \""
+		   << camera.value.width << "x" << camera.value.height << "\", \"seed\": " << e.seed
+		   << ", \"frames_per_scenario\": " << e.frames
+		   << ", \"min_range_mm\": " << e.min_range_mm
+		   << ", \"max_range_mm\": " << e.max_range_mm
+		   << ", \"any_side\": " << (e.any_side ? "true" : "false")
+		   << ", \"side_max_angle_deg\": " << e.side_max_angle_deg
+		   << ", \"track\": " << (e.track ? "true" : "false")
+		   << ", \"seconds\": " << seconds
+		   << ",\n  \"worst_correct_rot_err_deg\": " << t.worst_rot_err_deg
+		   << ", \"worst_correct_trans_err_frac\": " << t.worst_trans_err_frac
+		   << ",\n  \"scenarios\": {";
+		bool first = true;
+		for (int s = 0; s < kScenarioCount; ++s) {
+			if (per[s].frames == 0)
+				continue;
+			js << (first ? "\n    \"" : ",\n    \"")
+			   << scenarioName(static_cast<Scenario>(s)) << "\": ";
+			jsonTally(js, per[s]);
+			first = false;
+		}
+		js << "\n  },\n  \"total\": ";
+		jsonTally(js, t.total);
+		js << "\n}\n";
+	}
 	return t.wrong == 0 ? 0 : 1;
 }
