@@ -35,6 +35,7 @@ REPO = pathlib.Path(__file__).resolve().parent.parent.parent
 DBC = REPO / "firmware" / "protocol" / "dockpose.dbc"
 CANDECODE = REPO / "scripts" / "candecode"
 CANMATRIX_DECODE = REPO / "tests" / "firmware" / "canmatrix_decode.py"
+BOARD = REPO / "board" / "vm" / "board.json"
 PYTHON = "/usr/bin/python3"
 
 BASE_ID = 0x300
@@ -259,7 +260,7 @@ class Recording:
 
 
 def gpio_samples(folder):
-	"""[(uptime, value)] and {mark: uptime} from gpio.txt."""
+	"""[(uptime, value)] and {mark: [uptimes]} from gpio.txt."""
 	samples, marks = [], {}
 	try:
 		lines = (pathlib.Path(folder) / "gpio.txt").read_text(errors="replace").splitlines()
@@ -269,7 +270,7 @@ def gpio_samples(folder):
 		parts = line.split()
 		try:
 			if len(parts) == 3 and parts[1] == "mark":
-				marks[parts[2]] = float(parts[0])
+				marks.setdefault(parts[2], []).append(float(parts[0]))
 			elif len(parts) == 2 and parts[1] in ("0", "1"):
 				samples.append((float(parts[0]), int(parts[1])))
 		except ValueError:
@@ -297,12 +298,99 @@ def high_runs(samples):
 # --------------------------------------------------------------------------- board
 
 
+# Timing in the board check is relative to what the guest delivered in that run: a TCG guest on a
+# loaded host runs its loop several times slower (issue 8: heartbeats at 2.8 Hz, one gap of 4.8 s,
+# a command applied 3.6 s after it was sent), and the firmware is right to be slow then. What must
+# hold whatever the speed is said in loop iterations, frames and samples:
+#  - dockposed's loop (firmware/daemon.cpp) is: commands, wait for a frame, the frame (its status
+#    frame sent after the pipeline), then a heartbeat when one is due. So a command that arrives
+#    while an iteration is under way shows at the earliest in the next iteration: after it, at
+#    most one status frame and then one heartbeat of the iteration in progress may still show the
+#    old state (split_after); everything later must show its effect.
+#  - A heartbeat is due 1/heartbeat_hz after the previous one was sent; a status frame sent when
+#    it was due must be followed by a heartbeat before anything else (the same iteration).
+#  - candump's timestamps are taken while dockposed's send() runs; dockposed reads its clock just
+#    before sending a frame (faults, heartbeat time) and after the previous frame went out. Both are
+#    the guest's clock (CLOCK_REALTIME and CLOCK_MONOTONIC differ by a constant here: no NTP).
+FAULT_HOLD_S = 1.0  # docs/firmware.md: event bits stay set for one second after the event
+FAULT_CAMERA_STALL, FAULT_CAMERA_ERROR, FAULT_STROBE_ERROR = 0x01, 0x02, 0x04
+# candump prints microseconds; dockposed's reads and the kernel's timestamps are the same clock.
+CLOCK_TOL_S = 0.002
+# /proc/uptime (the gpio samples and marks) has two decimals, truncated.
+UPTIME_RES_S = 0.01
+
+
+def is_beat(e):
+	return e["type"] == "heartbeat"
+
+
+def split_after(events, t):
+	"""Status and heartbeat frames after bus time t, as (old, new): old is what the loop iteration
+	under way at t may still send (at most one status frame, then at most one heartbeat); new
+	comes from iterations that started after t, which have seen a command that arrived at t."""
+	after = [e for e in events if e["timestamp"] > t]
+	k = 0
+	if k < len(after) and not is_beat(after[k]):
+		k += 1
+	if k < len(after) and is_beat(after[k]):
+		k += 1
+	return after[:k], after[k:]
+
+
+def previous_time(events, e):
+	"""The bus time of the status or heartbeat frame before e (dockposed read the clock for e
+	after that one was sent); e's own for the first."""
+	i = next(k for k, x in enumerate(events) if x is e)
+	return events[i - 1 if i > 0 else 0]["timestamp"]
+
+
+def clock_offset(c, marks, commands):
+	"""(lo, hi): candump's clock minus /proc/uptime, from the cansend calls the guest bracketed
+	with marks (NAME before, NAME-sent after): the frame's timestamp lies between the two."""
+	pairs = list(zip(marks.get("bad-command", []), marks.get("bad-command-sent", []))) + list(
+		zip(marks.get("good-command", []), marks.get("good-command-sent", [])))
+	if len(pairs) != len(commands):
+		c.fail(f"{len(commands)} commands on the bus, {len(pairs)} bracketed by marks in gpio.txt")
+		return None
+	lo = max(t - sent - UPTIME_RES_S for (before, sent), (t, _) in zip(pairs, commands))
+	hi = min(t - before for (before, sent), (t, _) in zip(pairs, commands))
+	if not c.check(lo <= hi, f"candump's clock against /proc/uptime: offset known within "
+							 f"{(hi - lo) * 1000:.0f} ms (the shortest cansend)", f"lo {lo:.3f} > hi {hi:.3f}"):
+		return None
+	return lo, hi
+
+
+def samples_inside(samples, start, end, holes=()):
+	"""Samples read at an uptime in [start, end] for certain, outside every hole (uptime
+	intervals). A sample is "UPTIME VALUE" read in that order: its value was read after its
+	(truncated) uptime and before the next sample's."""
+	out = []
+	for (u, v), (u_next, _) in zip(samples, samples[1:]):
+		lo, hi = u, u_next + UPTIME_RES_S
+		if lo >= start and hi <= end and not any(lo <= h1 and hi >= h0 for h0, h1 in holes):
+			out.append((u, v))
+	return out
+
+
+def longest_high_run(samples):
+	"""The most consecutive high samples."""
+	best = run = 0
+	for _, v in samples:
+		run = run + 1 if v else 0
+		best = max(best, run)
+	return best
+
+
 def check_board(folder):
 	c = Checks()
 	rec = Recording(c, folder, "CAN")
+	board = json.loads(BOARD.read_text())
+	hz = board["can"]["heartbeat_hz"]
+	period = 1.0 / hz
 	log = rec.dockposed_log()
 	rc = rec.dockposed_rc()
-	c.check(rc == 0, "dockposed exited 0 after --for", f"status {rc}; stderr:\n{log}")
+	c.check(rc == 0, "dockposed exited 0 (SIGTERM from the guest after the last phase)",
+			f"status {rc}; stderr:\n{log}")
 	c.check("camera libcamera" in log and "gpiochip" in log and "socketcan:vcan0" in log,
 			"dockposed started on libcamera, gpiod (gpio-sim) and socketcan (vcan0)", log.strip()[:400])
 	m = re.search(r"^dockposed: ([\d.]+) s: (\d+) frames .*$", log, re.M)
@@ -323,57 +411,99 @@ def check_board(folder):
 	states = {r["state"] for r in reports[:-1]}
 	c.check(states <= {"STARTUP", "SEARCHING"} and "SEARCHING" in states,
 			f"status states before shutdown: {sorted(states)} (searching)")
-
-	# Heartbeats.
-	if len(beats) >= 2:
-		gaps = [b["timestamp"] - a["timestamp"] for a, b in zip(beats, beats[1:])]
-		span = beats[-1]["timestamp"] - beats[0]["timestamp"]
-		# Heartbeats come from the frame loop: a slow pipeline call (a cold search over vimc's
-		# text under TCG takes up to a second) delays them.
-		c.check(max(gaps) < 3.0, f"heartbeats: {len(beats)} at {(len(beats) - 1) / span:.1f} Hz "
-								 f"(board: 10 Hz), largest gap {max(gaps) * 1000:.0f} ms (< 3 s under TCG)")
-	else:
-		c.fail(f"heartbeats: only {len(beats)}")
-
-	# The commands: a corrupt one (rejected, nothing changes), then a good one.
-	if len(rec.commands) != 2:
-		c.fail(f"two DP_Command frames in the log, found {len(rec.commands)}")
+	if len(beats) < 2 or not reports:
+		c.fail(f"heartbeats: only {len(beats)}, status frames: {len(reports)}")
 		return c
-	t_bad, t_good = rec.commands[0][0], rec.commands[1][0]
+	# The loop's frames in bus order, without the SHUTDOWN status sent after the loop.
+	events = sorted(reports[:-1] + beats, key=lambda e: e["timestamp"])
+
+	# Heartbeats, against the loop's own pace.
+	gaps = [b["timestamp"] - a["timestamp"] for a, b in zip(beats, beats[1:])]
+	span = beats[-1]["timestamp"] - beats[0]["timestamp"]
+	# Never faster than heartbeat_hz: each is scheduled 1/hz after the previous one was sent (in
+	# dockposed's clock; on the bus the first one may show up to a send later, one period at most).
+	c.check((len(beats) - 1) * period <= span + period,
+			f"heartbeats: {len(beats)} in {span:.1f} s ({(len(beats) - 1) / span:.1f} Hz), not faster than "
+			f"heartbeat_hz {hz}")
+	# Never missed when due: every status frame sent 1/hz or more after the last heartbeat ends an
+	# iteration that must send the heartbeat right after it (before the next iteration's frames).
+	# This is exact at any guest speed; a slow iteration only makes the heartbeat late with it.
+	due = [(i, e) for i, e in enumerate(events) if not is_beat(e) and
+		   (last := next((x for x in reversed(events[:i]) if is_beat(x)), None)) is not None and
+		   e["timestamp"] - last["timestamp"] >= period + CLOCK_TOL_S]
+	missed = [e for i, e in due if i + 1 >= len(events) or not is_beat(events[i + 1])]
+	c.check(due and not missed,
+			f"heartbeats when due: each of the {len(due)} status frames sent 1/{hz} s or more after the last "
+			f"heartbeat is followed by a heartbeat from the same loop iteration",
+			f"{len(missed)} not, e.g. at {[round(e['timestamp'] - beats[0]['timestamp'], 2) for e in missed[:5]]} s")
+	c.info(f"heartbeats: largest gap {max(gaps) * 1000:.0f} ms; loop: {len(reports) - 1} status frames, latency "
+		   f"max {max((r['latency_ms'] for r in reports[:-1]), default=0):.0f} ms")
+
+	# The commands: corrupt ones (rejected, nothing changes), then a good one.
 	rc_all, objects, summary = candecode(rec.dir / "can.log")
 	cmds = [o for o in objects if o.get("type") == "command"]
 	errs = summary_errors(summary)
-	c.check(errs["crc"] == 1 and len(cmds) == 1 and cmds[0]["enable"] and cmds[0]["mode"] == "SEARCH_ONLY" and
-			cmds[0]["strobe"] == "CONSTANT",
-			"candecode on the whole bus: the corrupt command fails its CRC, the good one reads "
-			"enable, SEARCH_ONLY, CONSTANT", f"CRC errors {errs['crc']}, commands {cmds}")
+	n_bad = len(rec.commands) - 1
+	if n_bad < 1:
+		c.fail(f"a corrupt and a good DP_Command in the log, found {len(rec.commands)} commands")
+		return c
+	t_bads = [t for t, _ in rec.commands[:-1]]
+	t_good = rec.commands[-1][0]
+	c.check(errs["crc"] == n_bad and len(cmds) == 1 and cmds[0]["enable"] and cmds[0]["mode"] == "SEARCH_ONLY" and
+			cmds[0]["strobe"] == "CONSTANT" and cmds[0]["timestamp"] == t_good,
+			f"candecode on the whole bus: the {n_bad} corrupt command(s) fail their CRC, the last command "
+			"reads enable, SEARCH_ONLY, CONSTANT", f"CRC errors {errs['crc']}, commands {cmds}")
+	c.check(log.count("rejected: bad CRC") == n_bad,
+			f"dockposed logged each of the {n_bad} corrupt command(s) as 'bad CRC'",
+			f"{log.count('rejected: bad CRC')} times")
 
 	before = [b for b in beats if b["timestamp"] < t_good]
-	after = [b for b in beats if b["timestamp"] > t_good]
 	c.check(before and all(b["mode"] == "TRACK" and b["strobe"] == "ALTERNATE" and b["enabled"] for b in before),
 			f"before the command: {len(before)} heartbeats say TRACK, ALTERNATE, enabled",
 			str({(b['mode'], b['strobe'], b['enabled']) for b in before}))
-	changed = [b for b in after if b["mode"] == "SEARCH_ONLY" and b["strobe"] == "CONSTANT"]
-	if changed:
-		t_change = changed[0]["timestamp"]
-		c.check(t_change - t_good < 3.0 and all(b in changed for b in after if b["timestamp"] >= t_change),
-				f"after the command: heartbeats say SEARCH_ONLY, CONSTANT from {t_change - t_good:.2f} s "
-				f"after it to the end ({len(changed)})",
-				str([(b['mode'], b['strobe']) for b in after]))
-	else:
-		c.fail("after the command: no heartbeat says SEARCH_ONLY, CONSTANT: "
-			   + str([(b['mode'], b['strobe']) for b in after]))
+
+	# The good command: applied by the first loop iteration after it, to the end.
+	old, new = split_after(events, t_good)
+
+	def applied(e):
+		return e["strobe"] == "CONSTANT" and (not is_beat(e) or e["mode"] == "SEARCH_ONLY")
+
+	if not new:
+		c.fail(f"after the command: no loop iteration started after it ({len(old)} frames)")
 		return c
-	rejected_flags = [o for o in reports + beats if o["fault_bits"] & FAULT_COMMAND_REJECTED]
-	c.check(rejected_flags and all(t_bad <= o["timestamp"] <= t_bad + 3.5 for o in rejected_flags),
-			f"COMMAND_REJECTED set after the corrupt command only ({len(rejected_flags)} frames)",
-			str([round(o['timestamp'] - t_bad, 2) for o in rejected_flags]))
-	c.check("rejected: bad CRC" in log, "dockposed logged the corrupt command as 'bad CRC'")
+	wrong = [e for e in new if not applied(e)]
+	t_change = next((e["timestamp"] for e in old + new if applied(e)), new[0]["timestamp"])
+	c.check(not wrong and any(is_beat(e) for e in new),
+			f"after the command: every frame of the {len(new)} after the iteration in progress says CONSTANT "
+			f"(heartbeats: SEARCH_ONLY); first seen {t_change - t_good:.2f} s after it, "
+			f"{sum(not applied(e) for e in old)} frame(s) of the iteration in progress before",
+			str([(e['type'], e.get('mode'), e['strobe']) for e in wrong[:5]]))
+
+	# COMMAND_REJECTED after each corrupt command (the hold counts from when dockposed read it,
+	# at the top of the first iteration after it): set in every frame of a later iteration sent
+	# within the hold of the command's bus time; clear in any frame whose clock reading (after
+	# the previous frame went out) is a hold or more after the first of those iterations' frames,
+	# by which time it had read the command for certain.
+	must, allowed = [], set()
+	for tb in t_bads:
+		_, new_b = split_after(events, tb)
+		must += [e for e in new_b if e["timestamp"] < tb + FAULT_HOLD_S - CLOCK_TOL_S]
+		if new_b:
+			until = new_b[0]["timestamp"] + FAULT_HOLD_S + CLOCK_TOL_S
+			allowed |= {id(e) for e in new_b if previous_time(events, e) < until}
+	flagged = [e for e in events if e["fault_bits"] & FAULT_COMMAND_REJECTED]
+	unset = [e for e in must if not e["fault_bits"] & FAULT_COMMAND_REJECTED]
+	stray = [e for e in flagged if id(e) not in allowed]
+	c.check(must and not unset,
+			f"COMMAND_REJECTED set in the {len(must)} frame(s) sent within the {FAULT_HOLD_S:.0f} s hold by "
+			f"loop iterations after the {n_bad} corrupt command(s)",
+			"no loop iteration sent a frame within the hold of any corrupt command (each took longer)"
+			if not must else f"not in {len(unset)}: {[round(e['timestamp'] - t_bads[0], 2) for e in unset]}")
+	c.check(not stray, f"COMMAND_REJECTED nowhere else ({len(flagged)} frames carry it)",
+			str([round(e['timestamp'] - t_bads[0], 2) for e in stray[:5]]))
 
 	alt = [r for r in reports if r["timestamp"] < t_good]
-	const = [r for r in reports[:-1] if r["timestamp"] > t_change]
-	c.check(all(r["strobe"] == "ALTERNATE" for r in alt) and all(r["strobe"] == "CONSTANT" for r in const),
-			"status frames: strobe ALTERNATE before the command, CONSTANT after it")
+	c.check(all(r["strobe"] == "ALTERNATE" for r in alt), "status frames: strobe ALTERNATE before the command")
 
 	# The camera's frame rate: heartbeat FrameRate, the frames the loop took over a window of at
 	# least a second ending at the heartbeat that recomputes it (dockposed recomputes at the first
@@ -408,11 +538,15 @@ def check_board(folder):
 		   f"{lit / frames_alt if frames_alt else 0:.2f} (0.5 when every pulse hits)")
 
 	# Constant: every frame the loop takes is lit and processed, so one status frame per camera
-	# frame: their count over the windows after the change must match the FrameRate values.
+	# frame: their count over the windows after the change must match the FrameRate values, which
+	# the loop measured itself (relative: a slow guest has fewer frames on both sides).
+	const = [r for r in reports[:-1] if r["timestamp"] > t_change]
 	frames_const, secs_const, in_const = camera_frames(t_change, reports[-1]["timestamp"])
 	n_const = statuses_in(in_const, const)
-	if secs_const >= 3.0 and n_const >= 3:
-		# FrameRate has 0.5 Hz steps; a frame at a window's edge may count on either side.
+	if len(in_const) >= 2 and n_const >= 3:
+		# FrameRate has 0.5 Hz steps (0.25 Hz of rounding per window second); a frame at a
+		# window's edge may count on either side, and the first frames after the switch were
+		# exposed before it (not lit: not processed): 20 % of the frames, 2 at least.
 		tol = max(2.0, 0.2 * frames_const) + 0.25 * secs_const
 		c.check(abs(n_const - frames_const) <= tol,
 				f"constant phase: {n_const} status frames in {secs_const:.1f} s ({n_const / secs_const:.2f}/s) "
@@ -420,30 +554,57 @@ def check_board(folder):
 				f"FrameRate over {len(in_const)} windows) within {tol:.1f}")
 	else:
 		c.fail(f"constant phase: too little to measure a rate ({n_const} status frames in "
-			   f"{secs_const:.1f} s of FrameRate windows)")
+			   f"{len(in_const)} FrameRate windows, {secs_const:.1f} s)")
 
-	# The LED line as gpio-sim saw it.
+	# The LED line as gpio-sim saw it, sampled by a shell loop as fast as the guest lets it.
 	samples, marks = gpio_samples(folder)
 	if not all(k in marks for k in ("running", "good-command", "exit")):
 		c.fail(f"gpio.txt lacks marks: {sorted(marks)}")
 		return c
-	alt_s = [s for s in samples if marks["running"] <= s[0] < marks["good-command"]]
-	runs = high_runs(alt_s)
+	# Alternate: pulses of exposure + 2 margins aimed at every other frame, so the line is high
+	# in at most duty = pulse x (frame rate / 2) of the time (0.18 on this board). Required, in the
+	# samples actually taken: high in fewer than 60 % of them, and no run of consecutive high
+	# samples longer than chance allows at twice that duty (sampling may be correlated with the
+	# pulses on one CPU): n * p^run < 1e-6. A line left on fails both. Seeing a pulse at all is
+	# reported only: a slow poll can miss every pulse of a few ms.
+	alt_s = samples_inside(samples, marks["running"][0], marks["good-command"][-1])
+	pulse_s = (board["camera"]["exposure_us"] + 2 * board["strobe"]["pulse_margin_us"]) * 1e-6
+	rate = max([board["camera"]["frame_rate_hz"]] + [b["frame_rate_hz"] for b in before])
+	p = min(0.5, 2 * pulse_s * rate / 2)
+	run_max = max(3, math.ceil(math.log(1e-6 / max(1, len(alt_s))) / math.log(p))) if p > 0 else 3
 	highs = sum(v for _, v in alt_s)
-	# Never long on: required. Seen high at all: reported only, since a shell loop sampling sysfs
-	# every few tens of ms under TCG can miss every pulse of a few ms.
-	# (Samples tens of ms apart can make neighbouring pulses look like one run.)
-	longest = max((r[1] - r[0] for r in runs), default=0)
-	c.check(alt_s and highs < 0.6 * len(alt_s) and longest < 1.0,
-			f"alternate phase: line 3 never stays on: high in {highs} of {len(alt_s)} samples, "
-			f"{len(runs)} high runs, longest {longest * 1000:.0f} ms", f"runs {runs[:5]}")
-	c.info(f"alternate phase: pulses seen in sysfs: {len(runs)}")
-	const_s = [s for s in samples if marks["good-command"] + 1.5 <= s[0] < marks["exit"] - 2.0]
+	longest = longest_high_run(alt_s)
+	c.check(len(alt_s) >= 10 and highs < 0.6 * len(alt_s) and longest <= run_max,
+			f"alternate phase: line 3 never stays on: high in {highs} of {len(alt_s)} samples (< 60 %), "
+			f"longest run {longest} samples (<= {run_max}, chance at duty {p:.2f})",
+			f"{len(alt_s)} samples" if len(alt_s) < 10 else "")
+	c.info(f"alternate phase: pulses seen in sysfs: {len(high_runs(alt_s))}")
+
+	# Constant: from the first frame saying CONSTANT (the line is switched on synchronously when
+	# the command is applied, before that frame) to the last frame before shutdown (the line goes
+	# off when the loop has ended), mapped onto /proc/uptime through the cansend brackets, every
+	# sample high; left out only around frames reporting a stall or a strobe dead-man (the LED is
+	# off then by design: no kick from the loop for stall_timeout_ms).
+	offset = clock_offset(c, marks, rec.commands)
+	if offset is None:
+		return c
+	lo, hi = offset
+	dark = FAULT_CAMERA_STALL | FAULT_CAMERA_ERROR | FAULT_STROBE_ERROR
+	holes = []
+	for i, e in enumerate(events):
+		if e["fault_bits"] & dark:
+			t0 = events[i - 1]["timestamp"] if i > 0 else e["timestamp"]
+			t1 = events[i + 1]["timestamp"] if i + 1 < len(events) else reports[-1]["timestamp"]
+			holes.append((t0 - hi, t1 - lo))
+	t_end = events[-1]["timestamp"]
+	const_s = samples_inside(samples, t_change - lo, t_end - hi, holes)
 	highs = sum(v for _, v in const_s)
-	c.check(const_s and highs >= 0.95 * len(const_s),
-			f"constant phase: line 3 high in {highs} of {len(const_s)} samples", "")
+	c.check(len(const_s) >= 5 and highs == len(const_s),
+			f"constant phase: line 3 high in {highs} of {len(const_s)} samples between the change and shutdown"
+			+ (f" ({len(holes)} dead-man/stall interval(s) left out)" if holes else ""),
+			f"lows at uptime {[u for u, v in const_s if not v][:8]}" if highs < len(const_s) else "too few samples")
 	last_high = max((t for t, v in samples if v), default=None)
-	c.check(last_high is not None and last_high < marks["exit"],
+	c.check(last_high is not None and last_high < marks["exit"][-1],
 			"the line went low before dockposed exited (LED off at shutdown)")
 	after = (rec.dir / "gpio-after.txt").read_text().strip() if (rec.dir / "gpio-after.txt").exists() else "?"
 	c.check(after == "0", f"after exit (line released, gpio-sim pull-down): sim_gpio3/value = {after}")

@@ -4,11 +4,22 @@
 # Guest half of the whole-firmware VM tests (tests/vm/firmware_vm.sh starts it with scripts/vm;
 # docs/vm-tests.md, "Whole firmware in the VMs"). Runs dockposed on real drivers and records
 # what the ecosystem's tools see, into OUT (the VM's share); the host checks it afterwards.
-# POSIX sh (dash in the x86_64 guest, busybox in the arm64 one): no python here.
+# POSIX sh (dash in both guests): no python here.
 #
-#   firmware_guest.sh board OUT DOCKPOSED BOARD RUN_S BAD_AT_S BAD_FRAME GOOD_AT_S GOOD_FRAME
-#       dockposed --board BOARD --for RUN_S; BAD_AT_S and GOOD_AT_S seconds after its first
-#       heartbeat, cansend BAD_FRAME and GOOD_FRAME (ID#HEX) on vcan0.
+#   firmware_guest.sh board OUT DOCKPOSED BOARD MAX_S BAD_FRAME GOOD_FRAME ALT_HB HOLD_HB TRIES CONST_HB CONST_REPORTS
+#       dockposed --board BOARD --for MAX_S (a cap only: the guest stops it with SIGTERM).
+#       The phases are counted in what dockposed itself sent on vcan0, not in seconds, so that a
+#       slow guest (TCG on a loaded host) gets the same test, only longer:
+#         alternate   until ALT_HB heartbeats were sent;
+#         corrupt     cansend BAD_FRAME, then wait for HOLD_HB heartbeats after it (heartbeats
+#                     are at least 1/heartbeat_hz apart, so HOLD_HB >= 12 outlasts the one
+#                     second a fault bit is held); again, up to TRIES times, until a status or
+#                     heartbeat frame carried COMMAND_REJECTED (a loop iteration longer than
+#                     the hold can legitimately let it expire unseen);
+#         command     cansend GOOD_FRAME (search only, strobe constant), wait for the first
+#                     heartbeat saying so;
+#         constant    until CONST_HB heartbeats and CONST_REPORTS status frames in constant
+#                     mode were sent; then SIGTERM.
 #   firmware_guest.sh replay OUT DOCKPOSED BOARD MAX_S
 #       dockposed --board BOARD --for MAX_S (a replay board: it stops when the frames run out).
 #
@@ -17,7 +28,9 @@
 #   gpio.txt         "UPTIME_S VALUE" samples of the gpio-sim line dockposed drives
 #                    ($DOCKPOSE_GPIO_SIM_DIR/sim_gpio3/value), polled with shell builtins only,
 #                    and "UPTIME_S mark NAME" lines (start, running, bad-command,
-#                    good-command, exit)
+#                    bad-command-sent (one pair per try), good-command, good-command-sent,
+#                    changed, stop, exit); a NAME and NAME-sent pair brackets a cansend, which
+#                    ties candump's clock to /proc/uptime for the host's checks
 #   gpio-after.txt   the line's value read after dockposed exited (the line is released)
 #   gpioinfo.txt     gpioinfo of the chip while dockposed holds the line
 #   cam-list.txt     cam -l before the run (board: vimc must be listed)
@@ -40,10 +53,57 @@ mark() {
 	echo "$(uptime_s) mark $1" >>"$OUT/gpio.txt"
 }
 
-# sleep_until T0 S: sleep until S seconds after uptime T0.
-sleep_until() {
-	while awk -v t0="$1" -v s="$2" -v now="$(uptime_s)" 'BEGIN { exit !(now < t0 + s) }'; do
-		sleep 0.1
+# can_after LINE: what dockposed sent after line LINE of can.log, as
+#   "HEARTBEATS REJECTED CHANGED CONSTANT"
+# heartbeats (0x306); status (0x305) and heartbeat frames with COMMAND_REJECTED (fault bit 7:
+# status byte 3, heartbeat byte 4); heartbeats saying SEARCH_ONLY and CONSTANT (byte 3: mode
+# bit 3, strobe bits 4-5); status frames saying CONSTANT (byte 0 bits 6-7). Little-endian bit
+# numbering, as in firmware/protocol/dockpose.dbc. A line candump is still writing may be cut:
+# a cut byte reads as at most 15, which sets none of these bits.
+can_after() {
+	awk -v from="$1" '
+	function hex(s, i, v) {
+		v = 0
+		for (i = 1; i <= length(s); i++)
+			v = v * 16 + index("0123456789ABCDEF", toupper(substr(s, i, 1))) - 1
+		return v
+	}
+	NR > from {
+		n = split($3, f, "#")
+		if (n < 2)
+			next
+		if (f[1] == "306") {
+			hb++
+			b3 = hex(substr(f[2], 7, 2))
+			if (hex(substr(f[2], 9, 2)) >= 128)
+				rej++
+			if (int(b3 / 8) % 2 == 1 && int(b3 / 16) % 4 == 1)
+				changed++
+		} else if (f[1] == "305") {
+			if (hex(substr(f[2], 7, 2)) >= 128)
+				rej++
+			if (int(hex(substr(f[2], 1, 2)) / 64) % 4 == 1)
+				constant++
+		}
+	}
+	END { printf "%d %d %d %d\n", hb, rej, changed, constant }' can.log
+}
+
+can_lines() {
+	wc -l <can.log | tr -d ' '
+}
+
+# wait_can LINE CONDITION: poll can_after LINE until CONDITION (an arithmetic expression of
+# hb, rej, changed, constant) holds or dockposed has exited; leaves the counts in those names.
+wait_can() {
+	while :; do
+		# shellcheck disable=SC2046 # four numbers
+		set -- "$1" "$2" $(can_after "$1")
+		# shellcheck disable=SC2034 # read by the CONDITION's arithmetic
+		hb=$3 rej=$4 changed=$5 constant=$6
+		[ $(($2)) -ne 0 ] && return 0
+		kill -0 "$daemon" 2>/dev/null || return 1
+		sleep 0.3
 	done
 }
 
@@ -53,7 +113,7 @@ OUT=$2
 DOCKPOSED=$3
 BOARD=$4
 case $mode in
-board) [ $# -eq 9 ] || die "board: want OUT DOCKPOSED BOARD RUN_S BAD_AT_S BAD_FRAME GOOD_AT_S GOOD_FRAME" ;;
+board) [ $# -eq 12 ] || die "board: want OUT DOCKPOSED BOARD MAX_S BAD_FRAME GOOD_FRAME ALT_HB HOLD_HB TRIES CONST_HB CONST_REPORTS" ;;
 replay) [ $# -eq 5 ] || die "replay: want OUT DOCKPOSED BOARD MAX_S" ;;
 *) die "unknown mode '$mode' (board or replay)" ;;
 esac
@@ -76,8 +136,10 @@ fi
 candump -L vcan0 >can.log 2>candump.err &
 dump=$!
 tries=0
+# (However long candump takes to start here; the count only guards a hang.)
 until grep -q ' vcan0 7FF#' can.log 2>/dev/null; do
-	[ $tries -lt 100 ] || die "candump on vcan0 never saw the probe frame: $(cat candump.err)"
+	kill -0 "$dump" 2>/dev/null || die "candump on vcan0 exited: $(cat candump.err)"
+	[ $tries -lt 1000 ] || die "candump on vcan0 never saw the probe frame: $(cat candump.err)"
 	cansend vcan0 7FF#00 || die "cansend vcan0 failed"
 	sleep 0.1
 	tries=$((tries + 1))
@@ -100,22 +162,43 @@ mark start
 daemon=$!
 
 if [ "$mode" = board ]; then
-	# The first heartbeat (id 0x306) says dockposed has started (its --for counts from
-	# there; starting takes seconds in the arm64 guest): the commands are timed from it.
+	bad=$6 good=$7 alt_hb=$8 hold_hb=$9 reject_tries=${10} const_hb=${11} const_reports=${12}
+	# The first heartbeat (id 0x306) says dockposed has started (starting takes seconds in the
+	# arm64 guest): the phases count from it.
 	until grep -q ' vcan0 306#' can.log; do
 		kill -0 "$daemon" 2>/dev/null || break
 		sleep 0.1
 	done
-	t0=$(uptime_s)
 	mark running
 	# While dockposed holds the line: the kernel's view of it.
 	gpioinfo "$DOCKPOSE_GPIO_SIM_CHIP" >gpioinfo.txt 2>&1
-	sleep_until "$t0" "$6"
-	mark bad-command
-	cansend vcan0 "$7" || echo "firmware_guest: cansend $7 failed" >&2
-	sleep_until "$t0" "$8"
+	# Alternate phase.
+	wait_can 0 "hb >= $alt_hb"
+	# Corrupt commands: rejected, and seen rejected on the bus once.
+	try=0
+	while [ $try -lt "$reject_tries" ]; do
+		try=$((try + 1))
+		from=$(can_lines)
+		mark bad-command
+		cansend vcan0 "$bad" || echo "firmware_guest: cansend $bad failed" >&2
+		mark bad-command-sent
+		wait_can "$from" "hb >= $hold_hb" || break
+		[ "$rej" -eq 0 ] || break
+		echo "firmware_guest: try $try: no frame carried COMMAND_REJECTED within the hold" >&2
+	done
+	# The good command, and its effect.
+	from=$(can_lines)
 	mark good-command
-	cansend vcan0 "$9" || echo "firmware_guest: cansend $9 failed" >&2
+	cansend vcan0 "$good" || echo "firmware_guest: cansend $good failed" >&2
+	mark good-command-sent
+	# (Gives up after 100 heartbeats, ten seconds at least: the host check says why.)
+	wait_can "$from" "changed >= 1 || hb >= 100"
+	mark changed
+	# Constant phase.
+	from=$(can_lines)
+	wait_can "$from" "(hb >= $const_hb && constant >= $const_reports) || hb >= 20 * $const_hb"
+	mark stop
+	kill -TERM "$daemon" 2>/dev/null
 fi
 
 wait "$daemon"

@@ -9,8 +9,9 @@
 # arm64 guest has no python).
 #
 #   firmware_vm.sh [--timeout S] board ARCH DOCKPOSED OUT
-#       dockposed on board/vm/board.json in the ARCH (x86_64 | aarch64) VM for RUN_S seconds,
-#       a corrupt then a good DP_Command on vcan0 while it runs.
+#       dockposed on board/vm/board.json in the ARCH (x86_64 | aarch64) VM, a corrupt then a
+#       good DP_Command on vcan0 while it runs; the phases last as many heartbeats and status
+#       frames as set below, however long that takes the guest.
 #   firmware_vm.sh [--timeout S] replay DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT
 #       frames of the wedge target rendered with `dockpose render`, replayed by both builds in
 #       their VMs on a replay variant of the vm board; their pose frames compared.
@@ -26,11 +27,16 @@ GUEST=$HERE/firmware_guest.sh
 CHECK=$HERE/firmware_check.py
 BOARD=$REPO/board/vm/board.json
 
-# The board run: dockposed runs RUN_S seconds from its first heartbeat; the corrupt command
-# goes out BAD_AT_S seconds after it, the good one GOOD_AT_S seconds after it.
-RUN_S=${DOCKPOSE_VM_FW_RUN_S:-20}
-BAD_AT_S=7
-GOOD_AT_S=8
+# The board run, in what dockposed sends (firmware_guest.sh; a slow guest takes longer, it does
+# not get a shorter test). Heartbeats are at most heartbeat_hz (10) a second, so N heartbeats
+# span at least N/10 s. On a free core this is about 12 s of dockposed.
+ALT_HB=40           # alternate phase: 40 heartbeats (>= 3.9 s) before the first command
+HOLD_HB=13          # after a corrupt command: 13 heartbeats, > the 1 s a fault bit is held
+REJECT_TRIES=4      # corrupt commands until one is seen rejected on the bus
+CONST_HB=40         # constant phase: 40 heartbeats (>= 3.9 s) ...
+CONST_REPORTS=10    # ... and 10 status frames of lit frames processed
+# --for: a cap only (the guest stops dockposed with SIGTERM when the phases are over).
+MAX_S=${DOCKPOSE_VM_FW_MAX_S:-240}
 # The replay run: frames and their rate (low: the pipeline under TCG is slow, and the replay
 # camera never skips a frame, it queues them).
 REPLAY_FRAMES=30
@@ -106,8 +112,11 @@ board_test() {
 	bad=$("$CHECK" command --enable 1 --mode track --strobe off --alive 0 --bad-crc)
 	# Good: search only, strobe constant.
 	good=$("$CHECK" command --enable 1 --mode search_only --strobe constant --alive 1)
-	echo "commands: corrupt $bad at $BAD_AT_S s, good $good at $GOOD_AT_S s; run $RUN_S s"
-	in_vm "$arch" "$out" board "$out" "$dockposed" "$BOARD" "$RUN_S" "$BAD_AT_S" "$bad" "$GOOD_AT_S" "$good"
+	echo "commands: corrupt $bad after $ALT_HB heartbeats (up to $REJECT_TRIES times, $HOLD_HB" \
+		"heartbeats apart), then good $good; constant phase $CONST_HB heartbeats and" \
+		"$CONST_REPORTS status frames; --for $MAX_S s as a cap"
+	in_vm "$arch" "$out" board "$out" "$dockposed" "$BOARD" "$MAX_S" "$bad" "$good" \
+		"$ALT_HB" "$HOLD_HB" "$REJECT_TRIES" "$CONST_HB" "$CONST_REPORTS"
 	echo "== checks ($out)"
 	"$CHECK" board "$out"
 }
@@ -137,8 +146,10 @@ replay_test() {
 		-o "$out/board-replay.json" || die "cannot write the replay board"
 	echo "rendered $REPLAY_FRAMES frames into $out/frames; replay board $out/board-replay.json"
 
-	# Runs until the frames run out; --for only bounds a hang.
-	local max_s=$((REPLAY_FRAMES * 4 / REPLAY_RATE_HZ + 60))
+	# Runs until the frames run out (the replay camera queues frames, it never skips one, so a
+	# slow guest only takes longer); --for only bounds a hang, with room for a guest 20 times
+	# slower than real time.
+	local max_s=$((REPLAY_FRAMES * 20 / REPLAY_RATE_HZ + 60))
 	in_vm x86_64 "$out/x86_64" replay "$out/x86_64" "$x86" "$out/board-replay.json" "$max_s"
 	in_vm aarch64 "$out/aarch64" replay "$out/aarch64" "$arm" "$out/board-replay.json" "$max_s"
 	echo "== checks ($out)"
