@@ -33,8 +33,10 @@ done
 candump -L -n 1 -T 10000 vcan0 >"$scratch/candump.log" 2>&1 &
 dump=$!
 # Send until candump has its frame: it may not be listening yet when the first one goes out.
+# candump ends the loop (its frame, or -T: 10 s of silence once it listens, which our sends keep
+# from happening); the count only guards a hang, however slowly the guest starts candump.
 tries=0
-while kill -0 "$dump" 2>/dev/null && [ $tries -lt 40 ]; do
+while kill -0 "$dump" 2>/dev/null && [ $tries -lt 1000 ]; do
 	cansend vcan0 123#DEADBEEF || fail "cansend vcan0 failed"
 	sleep 0.25
 	tries=$((tries + 1))
@@ -71,7 +73,8 @@ gpioset --mode=signal "$chip" 3=1 &
 hold=$!
 seen=
 i=0
-while [ $i -lt 40 ]; do
+# Until the level shows or gpioset gave up (it exits on error); the count guards a hang only.
+while [ $i -lt 1000 ] && kill -0 "$hold" 2>/dev/null; do
 	seen=$(cat "$sim/sim_gpio3/value" 2>&1)
 	[ "$seen" = 1 ] && break
 	sleep 0.25
