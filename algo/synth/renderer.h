@@ -102,7 +102,8 @@ struct RenderOptions {
 	 * round soft halo. bloom > 0 turns it on and is the halo's radius (at half
 	 * its level) in multiples of the spot's radius (its largest semi-axis, at
 	 * least the blur sigma); 2-3 is typical. The spot's peak is multiplied by
-	 * bloom_overexposure and made at least 1.5 x 255 (so it always clips);
+	 * bloom_overexposure and made at least 1.5 x 255 (so it clips, unless it is
+	 * also dimmed: dimming applies last);
 	 * bloom_halo_peak is the halo's level above background at its centre.
 	 * With bloom_reflections the LED-like reflections bloom the same way.
 	 */
