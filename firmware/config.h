@@ -85,7 +85,7 @@ struct PipelineSection {
 	std::string target;	/* target JSON */
 	TrackMode mode = TrackMode::Track;
 	double max_rms_px = 0.6;
-	int min_leds_search = 5;
+	int min_leds_search = 4;
 	int min_leds_track = 4;
 	/* Degraded: a pose is still valid but with fewer LEDs than the model has, or
 	 * poses were lost within the last `degraded_hold_frames` frames. */
