@@ -94,13 +94,14 @@ can_lines() {
 }
 
 # wait_can LINE CONDITION: poll can_after LINE until CONDITION (an arithmetic expression of
-# hb, rej, changed, constant) holds or dockposed has exited; leaves the counts in those names.
+# hb, rej, changed, constant, and samples: the lines of gpio.txt) holds or dockposed has
+# exited; leaves the counts in those names.
 wait_can() {
 	while :; do
 		# shellcheck disable=SC2046 # four numbers
 		set -- "$1" "$2" $(can_after "$1")
 		# shellcheck disable=SC2034 # read by the CONDITION's arithmetic
-		hb=$3 rej=$4 changed=$5 constant=$6
+		hb=$3 rej=$4 changed=$5 constant=$6 samples=$(wc -l <gpio.txt)
 		[ $(($2)) -ne 0 ] && return 0
 		kill -0 "$daemon" 2>/dev/null || return 1
 		sleep 0.3
@@ -172,8 +173,10 @@ if [ "$mode" = board ]; then
 	mark running
 	# While dockposed holds the line: the kernel's view of it.
 	gpioinfo "$DOCKPOSE_GPIO_SIM_CHIP" >gpioinfo.txt 2>&1
-	# Alternate phase.
-	wait_can 0 "hb >= $alt_hb"
+	# Alternate phase; and 30 samples of the line at least (a starved guest samples slowly; the
+	# host's checks of the line are statistics over the samples taken).
+	s0=$(wc -l <gpio.txt)
+	wait_can 0 "hb >= $alt_hb && samples >= $s0 + 30"
 	# Corrupt commands: rejected, and seen rejected on the bus once.
 	try=0
 	while [ $try -lt "$reject_tries" ]; do
@@ -196,7 +199,8 @@ if [ "$mode" = board ]; then
 	mark changed
 	# Constant phase.
 	from=$(can_lines)
-	wait_can "$from" "(hb >= $const_hb && constant >= $const_reports) || hb >= 20 * $const_hb"
+	s0=$(wc -l <gpio.txt)
+	wait_can "$from" "(hb >= $const_hb && constant >= $const_reports && samples >= $s0 + 30) || hb >= 20 * $const_hb"
 	mark stop
 	kill -TERM "$daemon" 2>/dev/null
 fi
