@@ -55,6 +55,21 @@ inline bool anyAtLeast(U8x16 v, U8x16 level)
 
 constexpr std::uint32_t kNoLabel = 0xffffffffu;
 
+/* Variance of the rounding of a pixel to an integer level, levels^2. */
+constexpr double kQuantisationVar = 1.0 / 12.0;
+/*
+ * Systematic centroid errors of a sampled spot (pixel locking), as the
+ * variance of the weight of each pixel of an edge ring, calibrated by
+ * Monte-Carlo over subpixel phases on rendered spots (docs/vision.md):
+ *  - the ring where the spot crosses its threshold: a pixel enters or
+ *    leaves with a step of one level, ~0.5 level^2 each;
+ *  - the edge of a clipped plateau: each edge pixel's share of the plateau
+ *    is quantised, ~(0.06 of the clip weight)^2 each (the sharpest edges:
+ *    an LED many times brighter than the clip level).
+ */
+constexpr double kThresholdRingVar = 0.5;
+constexpr double kPlateauEdgeFraction2 = 4e-3;
+
 struct Run {
 	int x0, x1; /* inclusive */
 	std::uint32_t label;
@@ -75,7 +90,7 @@ struct BlobDetector::Impl {
 	{
 	}
 
-	bool label(const ImageView &image, const ThresholdMap &map, int fill_gap);
+	bool label(const ImageView &image, const ThresholdMap &map, int fill_gap, int clip_level);
 
 	std::uint32_t find(std::uint32_t x)
 	{
@@ -106,6 +121,23 @@ struct BlobDetector::Impl {
 		d.y_min = std::min(d.y_min, s.y_min);
 		d.y_max = std::max(d.y_max, s.y_max);
 		d.peak = std::max(d.peak, s.peak);
+		d.noisy += s.noisy;
+		d.sum_x += s.sum_x;
+		d.sum_y += s.sum_y;
+		d.sum_xx += s.sum_xx;
+		d.sum_yy += s.sum_yy;
+		d.sum_xy += s.sum_xy;
+		d.saturated += s.saturated;
+		d.sat_x += s.sat_x;
+		d.sat_y += s.sat_y;
+		d.sat_x_min = std::min(d.sat_x_min, s.sat_x_min);
+		d.sat_x_max = std::max(d.sat_x_max, s.sat_x_max);
+		d.sat_y_min = std::min(d.sat_y_min, s.sat_y_min);
+		d.sat_y_max = std::max(d.sat_y_max, s.sat_y_max);
+		d.sum_t += s.sum_t;
+		d.sum_tx += s.sum_tx;
+		d.sum_ty += s.sum_ty;
+		d.level_min = std::min(d.level_min, s.level_min);
 		return a;
 	}
 
@@ -122,7 +154,8 @@ struct BlobDetector::Impl {
 	bool overflow = false;
 };
 
-bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, int fill_gap)
+bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, int fill_gap,
+			       int clip_level)
 {
 	labels = 0;
 	components = 0;
@@ -180,6 +213,13 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 		std::uint32_t area = 0;
 		std::uint64_t sw = 0, swx = 0, swxx = 0;
 		std::uint8_t peak = 0;
+		/* unweighted sums of the run's noisy pixels; its saturated pixels */
+		std::uint32_t nn = 0, ns = 0;
+		std::uint64_t sx = 0, sxx = 0, ssx = 0;
+		int sx0 = 0, sx1 = 0;
+		/* the levels of the run's segmented pixels */
+		std::uint64_t st = 0, stx = 0;
+		std::uint8_t lmin = 255;
 
 		auto close_run = [&]() {
 			while (j < nprev && prev[j].x1 < rx0 - 1)
@@ -217,6 +257,27 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 			m.x_max = std::max(m.x_max, static_cast<std::uint16_t>(rx1));
 			m.y_max = static_cast<std::uint16_t>(y);
 			m.peak = std::max(m.peak, peak);
+			m.noisy += nn;
+			m.sum_x += sx;
+			m.sum_xx += sxx;
+			m.sum_y += yy * nn;
+			m.sum_yy += yy * yy * nn;
+			m.sum_xy += yy * sx;
+			m.sum_t += st;
+			m.sum_tx += stx;
+			m.sum_ty += yy * st;
+			m.level_min = std::min(m.level_min, lmin);
+			if (ns > 0) {
+				m.saturated += ns;
+				m.sat_x += ssx;
+				m.sat_y += yy * ns;
+				m.sat_x_min =
+					std::min(m.sat_x_min, static_cast<std::uint16_t>(sx0));
+				m.sat_x_max =
+					std::max(m.sat_x_max, static_cast<std::uint16_t>(sx1));
+				m.sat_y_min = std::min(m.sat_y_min, static_cast<std::uint16_t>(y));
+				m.sat_y_max = std::max(m.sat_y_max, static_cast<std::uint16_t>(y));
+			}
 			cur[ncur++] = Run{ rx0, rx1, root };
 		};
 
@@ -232,6 +293,10 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 				area = 1;
 				sw = swx = swxx = 0;
 				peak = 0;
+				nn = ns = 0;
+				sx = sxx = ssx = 0;
+				st = stx = 0;
+				lmin = 255;
 			}
 			const std::uint64_t w = std::uint64_t{ v } - level + 1; /* v >= level */
 			const std::uint64_t ux = static_cast<std::uint64_t>(x);
@@ -239,6 +304,20 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 			swx += w * ux;
 			swxx += w * ux * ux;
 			peak = std::max(peak, v);
+			st += level;
+			stx += std::uint64_t{ level } * ux;
+			lmin = std::min(lmin, level);
+			if (v < clip_level) {
+				++nn;
+				sx += ux;
+				sxx += ux * ux;
+			} else {
+				if (ns == 0)
+					sx0 = x;
+				++ns;
+				ssx += ux;
+				sx1 = x;
+			}
 			rx1 = x;
 		};
 
@@ -298,6 +377,7 @@ BlobDetector::BlobDetector(int max_width, int max_height, const ThresholdConfig 
 	  impl_(new Impl(thresholder_.maxWidth(), thresholder_.maxHeight()))
 {
 	filter_.fill_gap_px = std::clamp(filter_.fill_gap_px, 0, kMaxFrameSide);
+	filter_.clip_level = std::clamp(filter_.clip_level, 1, 256);
 }
 
 BlobDetector::~BlobDetector()
@@ -312,7 +392,7 @@ bool BlobDetector::labelImpl(const ImageView &image, const ThresholdMap &map)
 	impl_->overflow = false;
 	if (!image.valid() || image.width > impl_->max_width || image.height > impl_->max_height)
 		return false;
-	return impl_->label(image, map, filter_.fill_gap_px);
+	return impl_->label(image, map, filter_.fill_gap_px, filter_.clip_level);
 }
 
 std::size_t BlobDetector::componentCount() const
@@ -325,7 +405,7 @@ const BlobMoments *BlobDetector::components() const
 	return impl_->acc.data();
 }
 
-Blob BlobDetector::measure(const BlobMoments &m)
+Blob BlobDetector::measure(const BlobMoments &m, double noise_sigma)
 {
 	__extension__ using Int128 = __int128;
 
@@ -351,6 +431,26 @@ Blob BlobDetector::measure(const BlobMoments &m)
 	const double sw = static_cast<double>(m.sum_w);
 	b.u_px = static_cast<double>(m.sum_wx) / sw;
 	b.v_px = static_cast<double>(m.sum_wy) / sw;
+	{
+		/*
+		 * The centroid with one level for the whole spot, its lowest:
+		 * w' = v - T_min + 1 = w + (T - T_min). A spot across tiles of
+		 * different levels is otherwise weighted unevenly (a step of one
+		 * level over half a small spot moves it by ~0.01 px).
+		 */
+		const std::uint64_t n_seg = std::uint64_t{ m.noisy } + m.saturated;
+		const std::uint64_t t0 = m.level_min;
+		const std::uint64_t sw1 = m.sum_w + m.sum_t - t0 * n_seg;
+		if (n_seg > 0 && sw1 > 0) {
+			const double d = static_cast<double>(sw1);
+			b.u_px = static_cast<double>(m.sum_wx + m.sum_tx -
+						     t0 * (m.sum_x + m.sat_x)) /
+				 d;
+			b.v_px = static_cast<double>(m.sum_wy + m.sum_ty -
+						     t0 * (m.sum_y + m.sat_y)) /
+				 d;
+		}
+	}
 
 	/*
 	 * Central second moments, exact in 128-bit integers:
@@ -379,7 +479,71 @@ Blob BlobDetector::measure(const BlobMoments &m)
 	b.sigma_minor_px = std::sqrt(l_minor);
 	b.elongation = b.sigma_major_px / b.sigma_minor_px;
 	b.fill = b.area_px / (std::numbers::pi * 4.0 * b.sigma_major_px * b.sigma_minor_px);
+	b.saturated_px = static_cast<int>(m.saturated);
+	if (noise_sigma >= 0.0)
+		centroidCovariance(m, noise_sigma, &b);
 	return b;
+}
+
+void BlobDetector::centroidCovariance(const BlobMoments &m, double noise_sigma, Blob *b)
+{
+	__extension__ using Int128 = __int128;
+
+	/*
+	 * u = sum w x / W with w = v - T + 1: du = sum (x - u) dv / W, so with
+	 * independent pixel noise of variance s2, var(u) = s2 sum (x - u)^2 / W^2
+	 * over the pixels whose value is noisy (clipped pixels are not). The
+	 * sums about (u, v) from the unweighted moments, exact in integers:
+	 * sum (x - u)^2 = (n sum_xx - sum_x^2) / n + n (mean_x - u)^2.
+	 */
+	const double s2 = std::max(noise_sigma * noise_sigma, kQuantisationVar);
+	const std::uint64_t n_seg = std::uint64_t{ m.noisy } + m.saturated;
+	const double sw = n_seg > 0 ? static_cast<double>(m.sum_w + m.sum_t -
+							  std::uint64_t{ m.level_min } * n_seg)
+				    : static_cast<double>(m.sum_w);
+	double sxx = 0.0, syy = 0.0, sxy = 0.0;
+	if (m.noisy > 0) {
+		const Int128 n = m.noisy;
+		const double dn = static_cast<double>(m.noisy);
+		const Int128 cxx = n * static_cast<Int128>(m.sum_xx) -
+				   static_cast<Int128>(m.sum_x) * static_cast<Int128>(m.sum_x);
+		const Int128 cyy = n * static_cast<Int128>(m.sum_yy) -
+				   static_cast<Int128>(m.sum_y) * static_cast<Int128>(m.sum_y);
+		const Int128 cxy = n * static_cast<Int128>(m.sum_xy) -
+				   static_cast<Int128>(m.sum_x) * static_cast<Int128>(m.sum_y);
+		const double dx = static_cast<double>(m.sum_x) / dn - b->u_px;
+		const double dy = static_cast<double>(m.sum_y) / dn - b->v_px;
+		sxx = static_cast<double>(cxx) / dn + dn * dx * dx;
+		syy = static_cast<double>(cyy) / dn + dn * dy * dy;
+		sxy = static_cast<double>(cxy) / dn + dn * dx * dy;
+	}
+	const double k = s2 / (sw * sw);
+	b->cov_uu_px2 = k * sxx;
+	b->cov_vv_px2 = k * syy;
+	b->cov_uv_px2 = k * sxy;
+
+	/*
+	 * Pixel locking, isotropic. For a disc of radius R the ring of one pixel
+	 * at its edge holds 4 / R of sum (x - u)^2; the plateau's edge ring of
+	 * radius R_s (from its pixel count) holds pi R_s^3 per axis.
+	 */
+	const double n_all = static_cast<double>(n_seg);
+	if (n_all > 0.0) {
+		const double radius = std::max(1.0, std::sqrt(n_all / std::numbers::pi));
+		const double ring = 0.5 * (sxx + syy) * 4.0 / radius;
+		double sys = kThresholdRingVar * ring;
+		if (m.saturated > 0) {
+			const double clip_w = static_cast<double>(m.peak) -
+					      static_cast<double>(m.level_min) + 1.0;
+			const double r_s =
+				std::max(0.5, std::sqrt(static_cast<double>(m.saturated) /
+							std::numbers::pi));
+			sys += kPlateauEdgeFraction2 * clip_w * clip_w * std::numbers::pi * r_s *
+			       r_s * r_s;
+		}
+		b->cov_uu_px2 += sys / (sw * sw);
+		b->cov_vv_px2 += sys / (sw * sw);
+	}
 }
 
 namespace {
@@ -427,6 +591,7 @@ bool BlobDetector::detect(const ImageView &image, StaticVector<Blob, kMaxCandida
 					      : std::max<std::int64_t>(1, frame_px / 200);
 	const std::int64_t min_area = filter_.min_area_px;
 
+	const double noise = st->threshold.noise_sigma;
 	/* Keep the strongest kMaxCandidates in a heap whose top is the weakest. */
 	const BlobMoments *comps = impl_->acc.data();
 	for (std::size_t i = 0; i < n; ++i) {
@@ -439,7 +604,19 @@ bool BlobDetector::detect(const ImageView &image, StaticVector<Blob, kMaxCandida
 			++st->dropped_large;
 			continue;
 		}
-		const Blob b = measure(m);
+		Blob b = measure(m, noise);
+		/*
+		 * A spot cut by the frame's edge lost an unknown part: its centroid
+		 * may be off by up to half its visible extent along that axis.
+		 */
+		if (b.cov_uu_px2 > 0.0 && (m.x_min == 0 || m.x_max == image.width - 1)) {
+			const double half = 0.5 * (m.x_max - m.x_min + 1);
+			b.cov_uu_px2 += half * half;
+		}
+		if (b.cov_vv_px2 > 0.0 && (m.y_min == 0 || m.y_max == image.height - 1)) {
+			const double half = 0.5 * (m.y_max - m.y_min + 1);
+			b.cov_vv_px2 += half * half;
+		}
 		if (b.elongation > filter_.max_elongation || b.fill < filter_.min_fill) {
 			++st->dropped_shape;
 			continue;

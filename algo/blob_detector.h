@@ -34,6 +34,25 @@ struct BlobMoments {
 	std::uint64_t sum_wxx = 0, sum_wyy = 0, sum_wxy = 0;
 	std::uint16_t x_min = 0, x_max = 0, y_min = 0, y_max = 0;
 	std::uint8_t peak = 0; /* largest pixel value */
+	/*
+	 * Unweighted moments of the segmented pixels below the clip level (the
+	 * ones whose value carries the frame's noise): count, sums of x, y and
+	 * of their products. For the centroid's covariance.
+	 */
+	std::uint32_t noisy = 0;
+	std::uint64_t sum_x = 0, sum_y = 0;
+	std::uint64_t sum_xx = 0, sum_yy = 0, sum_xy = 0;
+	/* Pixels at or above the clip level, their sums of x and y, their bounding box. */
+	std::uint32_t saturated = 0;
+	std::uint64_t sat_x = 0, sat_y = 0;
+	std::uint16_t sat_x_min = 0xffff, sat_x_max = 0, sat_y_min = 0xffff, sat_y_max = 0;
+	/*
+	 * The levels T of the segmented pixels: their sum, sums of T x and T y,
+	 * and the lowest. A spot that straddles tiles of different levels is
+	 * re-weighted to one level, its lowest (see measure()).
+	 */
+	std::uint64_t sum_t = 0, sum_tx = 0, sum_ty = 0;
+	std::uint8_t level_min = 255;
 };
 
 /* A blob that passed the clean-up and shape filter. */
@@ -67,6 +86,12 @@ struct BlobFilterConfig {
 	double min_fill = 0.25;
 	/* Gaps of up to this many pixels inside a row are filled (closing). */
 	int fill_gap_px = 1;
+	/*
+	 * Pixels at or above this level are clipped by the sensor (1..256; 256:
+	 * none is): they carry no noise, and a spot with clipped pixels gets the
+	 * saturated treatment of its centroid (see measure()).
+	 */
+	int clip_level = 255;
 };
 
 struct BlobStats {
@@ -109,11 +134,17 @@ public:
 	const BlobFilterConfig &filterConfig() const { return filter_; }
 	Thresholder &thresholder() { return thresholder_; }
 
-	/* From raw moments to a Blob (centroid, axes, fill). */
-	static Blob measure(const BlobMoments &m);
+	/*
+	 * From raw moments to a Blob (centroid, axes, fill). With the frame's
+	 * pixel noise (levels, >= 0; ThresholdStats::noise_sigma) also the
+	 * centroid's covariance; without (< 0) it stays 0 (unknown).
+	 * Allocates: never.
+	 */
+	static Blob measure(const BlobMoments &m, double noise_sigma = -1.0);
 
 private:
 	struct Impl;
+	static void centroidCovariance(const BlobMoments &m, double noise_sigma, Blob *b);
 	/* Label into the component list of impl_ (componentCount() entries). */
 	bool labelImpl(const ImageView &image, const ThresholdMap &map);
 	std::size_t componentCount() const;

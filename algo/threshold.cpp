@@ -140,6 +140,8 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 		st->level_min = st->level_max = config_.fixed_level;
 		st->tiles_x = st->tiles_y = 1;
 		st->valid = true;
+		sampleNoise(image);
+		st->noise_sigma = noiseSigma().toDouble();
 		return map_;
 	}
 
@@ -261,6 +263,34 @@ void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
 			}
 			for (int u = col_min[c]; u <= v; ++u)
 				h[u] = 0;
+		}
+	}
+}
+
+void Thresholder::sampleNoise(const ImageView &image)
+{
+	for (auto &bank : diff_hist_)
+		bank.fill(0);
+	const int step = step_px_;
+	const int width = image.width;
+	/* The pairs (x, x + 1) on the sample grid that Auto mode uses, vertical in a 1-wide frame. */
+	int x0 = 0, nx = 0, y0 = 0, ny = 0;
+	samplePositions(0, std::max(1, width - 1), step, &x0, &nx);
+	samplePositions(0, image.height, step, &y0, &ny);
+	for (int j = 0; j < ny; ++j) {
+		const int y = y0 + j * step;
+		const std::uint8_t *p = image.row(y);
+		for (int i = 0; i < nx; ++i) {
+			const int x = x0 + i * step;
+			int d;
+			if (width > 1)
+				d = static_cast<int>(p[x + 1]) - static_cast<int>(p[x]);
+			else if (y + 1 < image.height)
+				d = static_cast<int>(image.row(y + 1)[x]) - static_cast<int>(p[x]);
+			else
+				continue;
+			++diff_hist_[static_cast<std::size_t>(i & 3)]
+				    [static_cast<std::size_t>(d < 0 ? -d : d)];
 		}
 	}
 }

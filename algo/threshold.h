@@ -22,6 +22,8 @@
  *    pixel; gradients cancel in the difference, spots are outliers). The
  *    median is interpolated within its histogram bin, so noise below one
  *    level is still measured (pixel quantisation adds 1/12 level^2).
+ *    Fixed mode measures it too, from pairs on the same sample grid (the
+ *    blobs' centroid covariance needs it).
  *
  * The arithmetic on levels is fixed point (algo/fixed_point.h). The sample
  * reads about 1/sample_step_px^2 of the pixels (1/256 by default: 16
@@ -69,7 +71,7 @@ struct ThresholdStats {
 	int level_min = 0; /* smallest and largest tile level of the frame */
 	int level_max = 0;
 	double background = 0.0; /* mean of the tile backgrounds, levels (Auto only, else 0) */
-	double noise_sigma = 0.0; /* robust noise estimate, levels (Auto only, else 0) */
+	double noise_sigma = 0.0; /* robust noise estimate, levels (both modes) */
 	int tiles_x = 0; /* the tile grid */
 	int tiles_y = 0;
 	bool valid = false; /* false: invalid view or frame larger than the Thresholder's */
@@ -175,6 +177,8 @@ private:
 	void computeAuto(const ImageView &image, ThresholdStats *stats);
 	/* Tile medians (medians_) and the difference histogram from the sparse sample. */
 	void sampleTiles(const ImageView &image, int cols, int rows);
+	/* Fixed mode: only the difference histogram, from pairs on the same sparse grid. */
+	void sampleNoise(const ImageView &image);
 	/* Robust noise sigma from the difference histogram, levels. */
 	UQ16_16 noiseSigma() const;
 
