@@ -19,6 +19,21 @@ struct CameraIntrinsics {
 	int height = 0;
 	double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
 	double k1 = 0.0, k2 = 0.0, p1 = 0.0, p2 = 0.0;
+	/*
+	 * Optional 1-sigma uncertainty of each parameter from the calibration
+	 * (the camera file's "sigma" object), same units; 0: exact. refinePose()
+	 * adds its effect to the pose covariance.
+	 */
+	struct Sigma {
+		double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
+		double k1 = 0.0, k2 = 0.0, p1 = 0.0, p2 = 0.0;
+
+		bool any() const
+		{
+			return fx > 0.0 || fy > 0.0 || cx > 0.0 || cy > 0.0 || k1 > 0.0 ||
+			       k2 > 0.0 || p1 > 0.0 || p2 > 0.0;
+		}
+	} sigma;
 
 	/* Empty when valid, else a sentence naming the bad value. Allocates: the message. */
 	std::string validate() const;

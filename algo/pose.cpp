@@ -303,43 +303,115 @@ using Matrix6d = Eigen::Matrix<double, 6, 6>;
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 
 struct Evaluation {
-	double sse = 0.0;    /* sum of squared pixel errors */
+	double sse = 0.0; /* sum of squared pixel errors */
 	double max_px = 0.0; /* largest pixel error */
-	Matrix6d JtJ = Matrix6d::Zero();
-	Vector6d Jtr = Vector6d::Zero();
+	double cost = 0.0; /* what is minimised: sse, or sum r^T S^-1 r when weighted */
+	Matrix6d JtJ = Matrix6d::Zero(); /* J^T W J (W = I unweighted) */
+	Vector6d Jtr = Vector6d::Zero(); /* J^T W r */
+};
+
+/* The points' covariances, when given: pixel_cov plus the LED tolerance. */
+struct Weights {
+	const Eigen::Matrix2d *pixel_cov = nullptr;
+	double fallback_px2 = 0.0; /* for a point whose covariance is unknown */
+	double led_mm2 = 0.0;
 };
 
 /*
+ * Inverse covariance of point i projected with jacobian jp (d uv / d X_c):
+ * S = pixel_cov[i] (or fallback_px2 I when not positive definite) +
+ * led_mm2 jp jp^T (J_p R s^2 I R^T J_p^T = s^2 J_p J_p^T).
+ */
+Eigen::Matrix2d inverseCovariance(const Weights &w, int i, const Eigen::Matrix<double, 2, 3> &jp)
+{
+	Eigen::Matrix2d S = w.pixel_cov[i];
+	const bool known = S.allFinite() && S(0, 0) > 0.0 && S(1, 1) > 0.0 &&
+			   S(0, 0) * S(1, 1) - S(0, 1) * S(1, 0) > 0.0;
+	if (!known)
+		S = w.fallback_px2 * Eigen::Matrix2d::Identity();
+	if (w.led_mm2 > 0.0)
+		S.noalias() += w.led_mm2 * jp * jp.transpose();
+	S(0, 1) = S(1, 0) = 0.5 * (S(0, 1) + S(1, 0));
+	return S.inverse();
+}
+
+/*
  * Reprojection residuals r_i = project(R M_i + t) - pixel_i and the normal
- * equations of their jacobian w.r.t. (dt, w): d(R M + t) = dt - [R M]x w.
+ * equations of their jacobian w.r.t. (dt, w): d(R M + t) = dt - [R M]x w,
+ * weighted by the inverse point covariances when `weights` has them.
  * False when a point is at or behind the camera.
  */
-bool evaluate(const CameraModel &camera, const Eigen::Vector3d *model_mm, const Eigen::Vector2d *pixels, int n,
-	      const Pose &pose, bool with_jacobian, Evaluation *ev)
+bool evaluate(const CameraModel &camera, const Eigen::Vector3d *model_mm,
+	      const Eigen::Vector2d *pixels, int n, const Pose &pose, bool with_jacobian,
+	      const Weights &weights, Evaluation *ev)
 {
 	ev->sse = 0.0;
 	ev->max_px = 0.0;
+	ev->cost = 0.0;
 	ev->JtJ.setZero();
 	ev->Jtr.setZero();
+	const bool weighted = weights.pixel_cov != nullptr;
 	for (int i = 0; i < n; ++i) {
 		const Eigen::Vector3d rm = pose.R * model_mm[i];
 		Eigen::Vector2d uv;
 		Eigen::Matrix<double, 2, 3> jp;
-		if (!camera.project(rm + pose.t_mm, &uv, with_jacobian ? &jp : nullptr))
+		if (!camera.project(rm + pose.t_mm, &uv, with_jacobian || weighted ? &jp : nullptr))
 			return false;
 		const Eigen::Vector2d r = uv - pixels[i];
 		const double r2 = r.squaredNorm();
 		ev->sse += r2;
 		ev->max_px = std::max(ev->max_px, std::sqrt(r2));
+		Eigen::Matrix2d W = Eigen::Matrix2d::Identity();
+		if (weighted) {
+			W = inverseCovariance(weights, i, jp);
+			ev->cost += r.dot(W * r);
+		}
 		if (with_jacobian) {
 			Eigen::Matrix<double, 2, 6> J;
 			J.leftCols<3>() = jp;
 			J.rightCols<3>() = -jp * skew(rm);
-			ev->JtJ.noalias() += J.transpose() * J;
-			ev->Jtr.noalias() += J.transpose() * r;
+			const Eigen::Matrix<double, 6, 2> JtW = J.transpose() * W;
+			ev->JtJ.noalias() += JtW * J;
+			ev->Jtr.noalias() += JtW * r;
 		}
 	}
-	return std::isfinite(ev->sse);
+	if (!weighted)
+		ev->cost = ev->sse;
+	return std::isfinite(ev->sse) && std::isfinite(ev->cost);
+}
+
+using Matrix68d = Eigen::Matrix<double, 6, 8>;
+
+/*
+ * Sum of J_i^T W_i dr_i/dtheta over the points, theta = (fx, fy, cx, cy, k1,
+ * k2, p1, p2): u = fx x' + cx, v = fy y' + cy with (x', y') the distorted
+ * normalised point, so the derivatives are those of method.md's model.
+ */
+bool calibrationCoupling(const CameraModel &camera, const Eigen::Vector3d *model_mm, int n,
+			 const Pose &pose, const Weights &weights, Matrix68d *G)
+{
+	const CameraIntrinsics &k = camera.intrinsics();
+	G->setZero();
+	for (int i = 0; i < n; ++i) {
+		const Eigen::Vector3d rm = pose.R * model_mm[i];
+		const Eigen::Vector3d p = rm + pose.t_mm;
+		Eigen::Vector2d uv;
+		Eigen::Matrix<double, 2, 3> jp;
+		if (!camera.project(p, &uv, &jp))
+			return false;
+		const double x = p.x() / p.z(), y = p.y() / p.z();
+		const Eigen::Vector2d d = camera.distort({ x, y });
+		const double r2 = x * x + y * y;
+		Eigen::Matrix<double, 2, 8> Jt;
+		Jt << d.x(), 0.0, 1.0, 0.0, k.fx * x * r2, k.fx * x * r2 * r2, k.fx * 2.0 * x * y, k.fx * (r2 + 2.0 * x * x),
+			0.0, d.y(), 0.0, 1.0, k.fy * y * r2, k.fy * y * r2 * r2, k.fy * (r2 + 2.0 * y * y), k.fy * 2.0 * x * y;
+		Eigen::Matrix<double, 2, 6> J;
+		J.leftCols<3>() = jp;
+		J.rightCols<3>() = -jp * skew(rm);
+		const Eigen::Matrix2d W = inverseCovariance(weights, i, jp);
+		G->noalias() += J.transpose() * W * Jt;
+	}
+	return G->allFinite();
 }
 
 Pose applyStep(const Pose &pose, const Vector6d &delta)
@@ -355,16 +427,24 @@ Pose applyStep(const Pose &pose, const Vector6d &delta)
 } /* namespace */
 
 bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, const Eigen::Vector2d *pixels,
-		int n, const Pose &initial, const RefineOptions &options, RefineResult *result)
+		int n, const Pose &initial, const RefineOptions &options, RefineResult *result,
+		const Eigen::Matrix2d *pixel_cov)
 {
 	*result = RefineResult{};
 	result->pose = initial;
 	if (n < 3 || n > static_cast<int>(kMaxLeds) || !initial.R.allFinite() || !initial.t_mm.allFinite())
 		return false;
 
+	Weights weights;
+	weights.pixel_cov = pixel_cov;
+	weights.fallback_px2 = options.sigma_px * options.sigma_px;
+	weights.led_mm2 = options.led_sigma_mm * options.led_sigma_mm;
+	if (pixel_cov && !(weights.fallback_px2 > 0.0))
+		return false;
+
 	Pose pose = initial;
 	Evaluation ev;
-	if (!evaluate(camera, model_mm, pixels, n, pose, true, &ev))
+	if (!evaluate(camera, model_mm, pixels, n, pose, true, weights, &ev))
 		return false;
 
 	/* Marquardt's damping, scaled by the diagonal of J^T J. */
@@ -396,9 +476,12 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 			const Pose candidate = applyStep(pose, delta);
 			Evaluation next;
 			/* Trial steps need only the error; the jacobian only once a step is taken. */
-			if (evaluate(camera, model_mm, pixels, n, candidate, false, &next) && next.sse < ev.sse &&
-			    evaluate(camera, model_mm, pixels, n, candidate, true, &next)) {
-				const double decrease = ev.sse - next.sse;
+			if (evaluate(camera, model_mm, pixels, n, candidate, false, weights,
+				     &next) &&
+			    next.cost < ev.cost &&
+			    evaluate(camera, model_mm, pixels, n, candidate, true, weights,
+				     &next)) {
+				const double decrease = ev.cost - next.cost;
 				const bool small_step = delta.head<3>().norm() <= 1e-10 * (1.0 + pose.t_mm.norm()) &&
 							delta.tail<3>().norm() <= 1e-12;
 				pose = candidate;
@@ -406,7 +489,7 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 				lambda = std::max(lambda * 0.2, 1e-9);
 				accepted = true;
 				/* A relative decrease of 1e-9 moves the pose by far less than its uncertainty. */
-				if (small_step || decrease <= 1e-9 * ev.sse)
+				if (small_step || decrease <= 1e-9 * ev.cost)
 					converged = true;
 			} else {
 				lambda *= 10.0;
@@ -425,6 +508,7 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 	result->converged = converged;
 	result->rms_px = std::sqrt(ev.sse / n);
 	result->max_px = ev.max_px;
+	result->chi2 = pixel_cov ? ev.cost : ev.sse / weights.fallback_px2;
 	if (!options.covariance)
 		return true;
 
@@ -445,10 +529,29 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 		return false;
 	const Matrix6d B_inv = es.eigenvectors() * lambdas.cwiseInverse().asDiagonal() *
 			       es.eigenvectors().transpose();
-	double sigma2 = options.sigma_px * options.sigma_px;
-	if (2 * n > 6)
-		sigma2 = std::max(sigma2, ev.sse / (2 * n - 6));
-	result->covariance = sigma2 * (inv_sqrt.asDiagonal() * B_inv * inv_sqrt.asDiagonal());
+	const Matrix6d inv = inv_sqrt.asDiagonal() * B_inv * inv_sqrt.asDiagonal();
+	if (!pixel_cov) {
+		double sigma2 = options.sigma_px * options.sigma_px;
+		if (2 * n > 6)
+			sigma2 = std::max(sigma2, ev.sse / (2 * n - 6));
+		result->covariance = sigma2 * inv;
+		return true;
+	}
+
+	/* Whitened: (J^T W J)^-1 as it is, plus the calibration's share. */
+	result->covariance = inv;
+	const CameraIntrinsics::Sigma &cal = camera.intrinsics().sigma;
+	if (cal.any()) {
+		Matrix68d G;
+		if (!calibrationCoupling(camera, model_mm, n, pose, weights, &G))
+			return false;
+		Eigen::Matrix<double, 8, 1> var;
+		var << cal.fx, cal.fy, cal.cx, cal.cy, cal.k1, cal.k2, cal.p1, cal.p2;
+		var = var.cwiseAbs2();
+		const Matrix68d D = inv * G; /* the sign does not matter in D S D^T */
+		result->covariance.noalias() += D * var.asDiagonal() * D.transpose();
+	}
+	result->covariance = 0.5 * (result->covariance + result->covariance.transpose()).eval();
 	return true;
 }
 

@@ -71,8 +71,18 @@ bool hornFit(const Eigen::Vector3d *model_mm, const Eigen::Vector3d *measured_mm
 
 struct RefineOptions {
 	int max_iterations = 20;
-	/* Pixel noise of one centroid, used as the floor of the covariance's sigma. */
+	/*
+	 * Pixel noise of one centroid. Without per-point covariances: the floor
+	 * of the covariance's sigma. With them: the sigma of a point whose
+	 * covariance is unknown (not positive definite, e.g. all 0).
+	 */
 	double sigma_px = 0.15;
+	/*
+	 * 1-sigma tolerance of each LED's position in the target, mm, isotropic
+	 * (TargetModel::led_sigma_mm). Used with per-point covariances only: each
+	 * point's covariance gains J_p R (s^2 I) R^T J_p^T.
+	 */
+	double led_sigma_mm = 0.0;
 	/* Compute the covariance (skipped for internal screening steps). */
 	bool covariance = true;
 };
@@ -84,9 +94,20 @@ struct RefineResult {
 	int iterations = 0;
 	bool converged = false;
 	/*
+	 * Sum of r^T S^-1 r over the points at the result, S each point's
+	 * covariance (pixel covariance plus the LED tolerance; sigma_px^2 I
+	 * without per-point covariances). About chi^2 with 2n - 6 degrees of
+	 * freedom when the match is right and the covariances honest.
+	 */
+	double chi2 = 0.0;
+	/*
 	 * Covariance of (tx, ty, tz [mm], rx, ry, rz [rad]) where (rx, ry, rz) is a
-	 * small rotation applied on the left: R_true = exp([r]x) R. sigma^2 is
-	 * max(sigma_px^2, residual variance).
+	 * small rotation applied on the left: R_true = exp([r]x) R.
+	 * Without per-point covariances: sigma^2 (J^T J)^-1 with sigma^2 =
+	 * max(sigma_px^2, residual variance). With them: (J^T W J)^-1, W the
+	 * inverse point covariances, no floor and no scaling by the residuals,
+	 * plus D S_cal D^T when the camera carries calibration sigmas
+	 * (D = -(J^T W J)^-1 J^T W dr/dtheta over fx, fy, cx, cy, k1, k2, p1, p2).
 	 */
 	Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
 };
@@ -94,11 +115,16 @@ struct RefineResult {
 /*
  * Minimise the reprojection error of n >= 3 model points against their
  * observed pixels (distorted, as measured) starting from `initial`.
- * Returns false when the problem is degenerate or a point falls behind the
- * camera. Allocates: never (n <= kMaxLeds).
+ * pixel_cov, when given, holds n 2x2 centroid covariances (px^2, e.g. from
+ * Blob::cov_*): the error minimised is then the whitened (Mahalanobis) one,
+ * with options.led_sigma_mm added to every point, and the covariance is
+ * propagated from them (see RefineResult). rms_px and max_px are the plain
+ * pixel figures either way. Returns false when the problem is degenerate or
+ * a point falls behind the camera. Allocates: never (n <= kMaxLeds).
  */
 bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, const Eigen::Vector2d *pixels,
-		int n, const Pose &initial, const RefineOptions &options, RefineResult *result);
+		int n, const Pose &initial, const RefineOptions &options, RefineResult *result,
+		const Eigen::Matrix2d *pixel_cov = nullptr);
 
 /*
  * Standard deviations of (roll, pan, tilt) in degrees from the 6x6 covariance
