@@ -228,6 +228,68 @@ LoadResult<TargetModel> parseTargetModel(const std::string &json_text, const std
 		m.faces.push_back(idx);
 	}
 
+	if (!readNumber(doc, "led_sigma_mm", source, false, &m.led_sigma_mm, &r.error))
+		return r;
+	if (!(std::isfinite(m.led_sigma_mm) && m.led_sigma_mm >= 0.0)) {
+		r.error = source + ": 'led_sigma_mm' must be a tolerance >= 0 mm, not " +
+			  doc["led_sigma_mm"].dump();
+		return r;
+	}
+
+	const auto approach = doc.find("approach");
+	if (approach != doc.end()) {
+		if (!approach->is_object()) {
+			r.error =
+				source +
+				": 'approach' must be an object {\"axis\": [x, y, z], \"max_deg\": a}, not " +
+				typeName(*approach);
+			return r;
+		}
+		const auto axis = approach->find("axis");
+		if (axis == approach->end()) {
+			r.error =
+				source +
+				": key 'approach.axis' is missing ([x, y, z] in the target frame)";
+			return r;
+		}
+		if (!axis->is_array() || axis->size() != 3) {
+			r.error = source +
+				  ": 'approach.axis' must be [x, y, z] (3 numbers), but it is " +
+				  (axis->is_array() ? "an array of " + std::to_string(axis->size())
+						    : std::string(typeName(*axis)));
+			return r;
+		}
+		Eigen::Vector3d a;
+		for (int k = 0; k < 3; ++k) {
+			if (!(*axis)[k].is_number()) {
+				r.error = source + ": 'approach.axis' coordinate " +
+					  std::to_string(k) + " must be a number, not " +
+					  typeName((*axis)[k]);
+				return r;
+			}
+			a[k] = (*axis)[k].get<double>();
+		}
+		const double norm = a.norm();
+		if (!(std::isfinite(norm) && norm > 1e-12)) {
+			r.error = source + ": 'approach.axis' must be a non-zero direction";
+			return r;
+		}
+		double max_deg = 0.0;
+		if (!readNumber(*approach, "max_deg", source + ": 'approach'", true, &max_deg,
+				&r.error))
+			return r;
+		if (!(max_deg > 0.0 && max_deg <= 180.0)) {
+			r.error =
+				source +
+				": 'approach.max_deg' must be an angle in (0, 180] degrees, not " +
+				(*approach)["max_deg"].dump();
+			return r;
+		}
+		m.approach.set = true;
+		m.approach.axis = a / norm;
+		m.approach.max_deg = max_deg;
+	}
+
 	const std::string invalid = m.validate();
 	if (!invalid.empty()) {
 		r.error = source + ": " + invalid;
@@ -282,6 +344,50 @@ LoadResult<CameraIntrinsics> parseCameraIntrinsics(const std::string &json_text,
 			return r;
 		}
 	}
+
+	/* Optional calibration uncertainty: 1 sigma per parameter, any subset. */
+	const auto sigma = doc.find("sigma");
+	if (sigma != doc.end()) {
+		if (!sigma->is_object()) {
+			r.error =
+				source +
+				": 'sigma' must be an object of 1-sigma uncertainties {\"fx\": .., ...}, not " +
+				typeName(*sigma);
+			return r;
+		}
+		CameraIntrinsics::Sigma &sg = k.sigma;
+		const Field sigmas[] = {
+			{ "fx", &sg.fx, false }, { "fy", &sg.fy, false }, { "cx", &sg.cx, false },
+			{ "cy", &sg.cy, false }, { "k1", &sg.k1, false }, { "k2", &sg.k2, false },
+			{ "p1", &sg.p1, false }, { "p2", &sg.p2, false },
+		};
+		for (auto it = sigma->begin(); it != sigma->end(); ++it) {
+			bool known = false;
+			for (const Field &f : sigmas)
+				known = known || it.key() == f.key;
+			if (!known) {
+				r.error =
+					source + ": 'sigma." + it.key() +
+					"' is not a parameter of the camera (fx, fy, cx, cy, k1, k2, p1, p2)";
+				return r;
+			}
+		}
+		for (const Field &f : sigmas) {
+			if (!readNumber(*sigma, f.key, source + ": 'sigma'", false, f.value,
+					&r.error))
+				return r;
+			if (!(std::isfinite(*f.value) && *f.value >= 0.0)) {
+				r.error = source + ": 'sigma." + f.key +
+					  "' must be a 1-sigma value >= 0, not " +
+					  (*sigma)[f.key].dump();
+				return r;
+			}
+		}
+	}
+	/* Written by calibration tools; dockpose does not use them, but they must be sane. */
+	double rms_px = 0.0;
+	if (!readNumber(doc, "rms_px", source, false, &rms_px, &r.error))
+		return r;
 
 	const std::string invalid = k.validate();
 	if (!invalid.empty())

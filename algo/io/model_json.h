@@ -7,12 +7,20 @@
  *            "faces": [[i, j, k, l], ...] }      convex planar quads, cyclic order
  *   "name" is optional (default: the file's stem), "units" is optional but
  *   must be "mm" when present. At most kMaxLeds points and kMaxFaces faces.
+ *   Optional: "led_sigma_mm": s (>= 0, the 1-sigma tolerance of each LED's
+ *   position, isotropic) and "approach": {"axis": [x, y, z] (non-zero,
+ *   normalised on reading), "max_deg": a (0 < a <= 180)}.
  *
  * Camera:  { "width": W, "height": H, "fx": .., "fy": .., "cx": .., "cy": ..,
  *            "k1": .., "k2": .., "p1": .., "p2": .. }
  *   width/height are integers (pixels); fx, fy, cx, cy in pixels are required;
  *   the distortion coefficients default to 0 when absent. A non-zero "k3"
  *   (or higher) is refused: dockpose's lens model has k1, k2, p1, p2 only.
+ *   Optional: "sigma": {"fx": .., "fy": .., "cx": .., "cy": .., "k1": ..,
+ *   "k2": .., "p1": .., "p2": ..}, the calibration's 1-sigma uncertainty of
+ *   any subset of the parameters (>= 0; CameraIntrinsics::sigma), and what a
+ *   calibration tool writes beside them: "rms_px" (a number), "frames",
+ *   "date" (not used).
  *
  * Unknown keys are ignored. Nothing here throws: every failure comes back as
  * an error sentence that names the file (or "<text>") and the problem.
