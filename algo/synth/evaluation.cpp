@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 #include <random>
+#include <vector>
 
 namespace dockpose {
 
@@ -126,6 +127,78 @@ std::uint32_t faceMask(const TargetModel &target, std::size_t f)
 	for (int v : target.faces[f])
 		m |= 1u << v;
 	return m;
+}
+
+/*
+ * The proper rigid symmetries of the LED set (rotation and translation in the
+ * target frame mapping every LED onto an LED within tol_mm), identity first:
+ * a pose composed with one of them shows the same image.
+ */
+struct Symmetry {
+	Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+	Eigen::Vector3d t = Eigen::Vector3d::Zero();
+};
+
+Eigen::Matrix3d triangleFrame(const Eigen::Vector3d &p, const Eigen::Vector3d &q,
+			      const Eigen::Vector3d &r)
+{
+	Eigen::Matrix3d m;
+	const Eigen::Vector3d e1 = (q - p).normalized();
+	const Eigen::Vector3d e3 = e1.cross(r - p).normalized();
+	m.col(0) = e1;
+	m.col(1) = e3.cross(e1);
+	m.col(2) = e3;
+	return m;
+}
+
+std::vector<Symmetry> modelSymmetries(const TargetModel &target, double tol_mm)
+{
+	std::vector<Symmetry> out(1);
+	const int n = static_cast<int>(target.points_mm.size());
+	if (n < 3)
+		return out;
+	/* A non-degenerate triangle of LEDs: 0, 1 and the one farthest from their line. */
+	const Eigen::Vector3d a = target.points_mm[0], b = target.points_mm[1];
+	int c = 2;
+	double best = -1.0;
+	for (int k = 2; k < n; ++k) {
+		const double d = (target.points_mm[k] - a).cross(b - a).norm();
+		if (d > best) {
+			best = d;
+			c = k;
+		}
+	}
+	const Eigen::Vector3d cc = target.points_mm[c];
+	const Eigen::Matrix3d F = triangleFrame(a, b, cc);
+	for (int i = 0; i < n; ++i)
+		for (int j = 0; j < n; ++j)
+			for (int k = 0; k < n; ++k) {
+				if (i == j || j == k || i == k || (i == 0 && j == 1 && k == c))
+					continue;
+				const Eigen::Vector3d p = target.points_mm[i],
+						      q = target.points_mm[j],
+						      r = target.points_mm[k];
+				if (std::abs((q - p).norm() - (b - a).norm()) > tol_mm ||
+				    std::abs((r - p).norm() - (cc - a).norm()) > tol_mm ||
+				    std::abs((r - q).norm() - (cc - b).norm()) > tol_mm)
+					continue;
+				Symmetry sym;
+				sym.R = triangleFrame(p, q, r) * F.transpose();
+				sym.t = p - sym.R * a;
+				bool maps = true;
+				for (int m = 0; m < n && maps; ++m) {
+					const Eigen::Vector3d x =
+						sym.R * target.points_mm[m] + sym.t;
+					double nearest = 1e30;
+					for (int l = 0; l < n; ++l)
+						nearest = std::min(
+							nearest, (x - target.points_mm[l]).norm());
+					maps = nearest <= tol_mm;
+				}
+				if (maps)
+					out.push_back(sym);
+			}
+	return out;
 }
 
 } /* namespace */
@@ -270,6 +343,14 @@ EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &came
 	};
 	const bool legacy_frames = config.scenario == Scenario::Legacy && !config.any_side;
 	const int n_faces = static_cast<int>(target.faces.size());
+	/*
+	 * A symmetric target's pose is defined only up to its symmetries (the
+	 * wedge's half turn about z, seen with any roll): the new scenarios
+	 * compare modulo them; the legacy frames keep the plain comparison.
+	 */
+	std::vector<Symmetry> symmetries(1);
+	if (!legacy_frames && config.modulo_symmetry)
+		symmetries = modelSymmetries(target, 0.5);
 
 	/* Mix: every scenario but Legacy, target-free weighted. */
 	std::array<double, kScenarioCount> mix_weight{};
@@ -373,13 +454,25 @@ EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &came
 		if (r.found) {
 			++tally.found;
 			++st.found;
-			out.rot_err_deg = rotationAngleDeg(out.truth.R, r.R);
-			out.trans_err_mm = (out.truth.t_mm - r.t_mm).norm();
-			out.correct =
-				!out.target_free && out.rot_err_deg <= config.max_rot_err_deg &&
-				out.trans_err_mm <=
-					std::max(config.min_trans_err_mm,
-						 config.trans_err_frac * out.truth.t_mm.norm());
+			const double trans_tol =
+				std::max(config.min_trans_err_mm,
+					 config.trans_err_frac * out.truth.t_mm.norm());
+			for (std::size_t k = 0; k < symmetries.size(); ++k) {
+				/* The truth composed with symmetry k: X_c = R (S X + s) + t. */
+				const Eigen::Matrix3d R_k = out.truth.R * symmetries[k].R;
+				const Eigen::Vector3d t_k =
+					out.truth.R * symmetries[k].t + out.truth.t_mm;
+				const double rot = rotationAngleDeg(R_k, r.R);
+				const double trans = (t_k - r.t_mm).norm();
+				const bool ok = rot <= config.max_rot_err_deg && trans <= trans_tol;
+				if (k == 0 || (ok && !out.correct)) {
+					out.rot_err_deg = rot;
+					out.trans_err_mm = trans;
+					out.correct = ok;
+					out.symmetry = static_cast<int>(k);
+				}
+			}
+			out.correct = out.correct && !out.target_free;
 			out.wrong = !out.correct;
 			if (out.correct) {
 				++tally.correct;

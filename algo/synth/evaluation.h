@@ -85,6 +85,13 @@ struct EvaluationConfig {
 	double side_max_angle_deg = 60.0;
 	/* Faster approximate read noise in the new scenarios (RenderOptions::fast_noise); Legacy keeps its own. */
 	bool fast_noise = true;
+	/*
+	 * New scenarios and any-side poses: a pose equal to the truth composed
+	 * with a rigid symmetry of the LED set is correct (it shows the same
+	 * image; the wedge has one, a half turn about z). Legacy frames compare
+	 * with the truth alone, as they always did.
+	 */
+	bool modulo_symmetry = true;
 };
 
 struct FrameOutcome {
@@ -104,6 +111,8 @@ struct FrameOutcome {
 	int view_face = -1;
 	double view_angle_deg = 0.0;
 	bool in_frame = true;
+	/* The symmetry the errors are measured against (0: the truth itself). */
+	int symmetry = 0;
 };
 
 /* One scenario's counts. */
