@@ -488,11 +488,13 @@ def check_board(folder):
 	# by which time it had read the command for certain.
 	must, allowed = [], set()
 	for tb in t_bads:
-		_, new_b = split_after(events, tb)
+		old_b, new_b = split_after(events, tb)
 		must += [e for e in new_b if e["timestamp"] < tb + FAULT_HOLD_S - CLOCK_TOL_S]
 		if new_b:
+			# (The "old" frames may be a new iteration's too, when the one under way at tb sent
+			# nothing more: they may carry the bit as well.)
 			until = new_b[0]["timestamp"] + FAULT_HOLD_S + CLOCK_TOL_S
-			allowed |= {id(e) for e in new_b if previous_time(events, e) < until}
+			allowed |= {id(e) for e in old_b + new_b if previous_time(events, e) < until}
 	flagged = [e for e in events if e["fault_bits"] & FAULT_COMMAND_REJECTED]
 	unset = [e for e in must if not e["fault_bits"] & FAULT_COMMAND_REJECTED]
 	stray = [e for e in flagged if id(e) not in allowed]
