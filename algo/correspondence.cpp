@@ -5,8 +5,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <limits>
 
 #include <Eigen/Geometry>
@@ -364,14 +362,17 @@ bool Correspondence::refineMatched(const Pose &initial, Hypothesis *h, bool cova
 		return false;
 	std::array<Eigen::Vector3d, kMaxLeds> model;
 	std::array<Eigen::Vector2d, kMaxLeds> pixels;
+	std::array<Eigen::Matrix2d, kMaxLeds> cov;
 	for (int k = 0; k < n; ++k) {
 		model[k] = target_.points_mm[h->match.pairs[k][0]];
 		pixels[k] = px_[h->match.pairs[k][1]];
+		cov[k] = cov_[h->match.pairs[k][1]];
 	}
 	RefineOptions options = config_.refine;
 	options.covariance = covariance;
+	options.led_sigma_mm = target_.led_sigma_mm;
 	const Pose start = initial; /* initial may alias h->refined.pose, which refinePose() resets */
-	return refinePose(camera_, model.data(), pixels.data(), n, start, options, &h->refined);
+	return refinePose(camera_, model.data(), pixels.data(), n, start, options, &h->refined, cov.data());
 }
 
 /*
@@ -533,11 +534,46 @@ int Correspondence::minLeds(bool tracking) const
 	return std::max(4, std::min(tracking ? config_.min_leds_track : config_.min_leds_search, total));
 }
 
+/*
+ * The error measure (method.md section 6): the residuals must be what the
+ * centroids' noise explains. Small in pixels (max_rms_px), or within the
+ * 99.9% point of chi^2 with 2k - 6 degrees of freedom under the points'
+ * covariances (Wilson-Hilferty), scaled by `slack`.
+ */
+bool Correspondence::errorExplained(const Hypothesis &h, double slack) const
+{
+	if (h.refined.rms_px <= slack * config_.max_rms_px)
+		return true;
+	const double dof = std::max(2.0 * static_cast<double>(h.match.pairs.size()) - 6.0, 1.0);
+	const double c = 2.0 / (9.0 * dof);
+	const double q = dof * std::pow(1.0 - c + 3.09 * std::sqrt(c), 3.0);
+	return h.refined.chi2 <= slack * slack * q;
+}
+
 bool Correspondence::acceptable(const Hypothesis &h) const
 {
 	return static_cast<int>(h.match.pairs.size()) >= minLeds(h.tracked) && h.missing <= config_.max_missing &&
-	       h.refined.rms_px <= config_.max_rms_px && h.refined.converged && plausible(h.refined.pose) &&
+	       errorExplained(h, 1.0) && h.refined.converged && plausible(h.refined.pose) &&
 	       h.log10_nfa <= config_.max_log10_nfa;
+}
+
+/*
+ * Can `other` stand beside `chosen`? Acceptable but for the false-alarm
+ * bound, which is relaxed to ambiguity_margin decades above the chosen
+ * pose's, and the error, within the bound or twice the chosen pose's (four
+ * times the bound for a pose that explains more LEDs than the chosen one):
+ * two explanations that close cannot be told apart, wherever the bounds
+ * happen to fall between them.
+ */
+bool Correspondence::rival(const Hypothesis &other, const Hypothesis &chosen) const
+{
+	return static_cast<int>(other.match.pairs.size()) >= minLeds(other.tracked) &&
+	       other.missing <= config_.max_missing &&
+	       (other.match.pairs.size() > chosen.match.pairs.size()
+			? errorExplained(other, 4.0)
+			: errorExplained(other, 1.0) || other.refined.rms_px <= 2.0 * chosen.refined.rms_px) &&
+	       other.refined.converged && plausible(other.refined.pose) &&
+	       other.log10_nfa <= std::max(config_.max_log10_nfa, chosen.log10_nfa + config_.ambiguity_margin);
 }
 
 /* Acceptable first; then more LEDs explained; then fewer false alarms; then lower error. */
@@ -778,6 +814,8 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
 			return false;
 	}
 
+	if (verified_ >= config_.max_verifications)
+		return false;
 	++verified_;
 	Hypothesis h;
 	if (!refineMatch(pose, 2.0 * gate, minLeds(false), &h))
@@ -884,7 +922,7 @@ bool Correspondence::searchQuads()
 					}
 					if (earlier)
 						continue;
-					if (hypotheses_ >= config_.max_hypotheses) {
+					if (hypotheses_ >= config_.max_hypotheses || verified_ >= config_.max_verifications) {
 						budget_hit_ = true;
 						return false;
 					}
@@ -929,7 +967,7 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
 			continue;
 		const double gate = 2.0 * gatePx(pose);
 		Match rough;
-		if (matchPredicted(pose, gate, &rough) < minLeds(false))
+		if (matchPredicted(pose, gate, &rough) < minLeds(false) || verified_ >= config_.max_verifications)
 			continue;
 		++verified_;
 		Hypothesis h;
@@ -968,7 +1006,7 @@ bool Correspondence::searchTriangles()
 				}
 				if (earlier)
 					continue;
-				if (hypotheses_ >= budget) {
+				if (hypotheses_ >= budget || verified_ >= config_.max_verifications) {
 					budget_hit_ = true;
 					return false;
 				}
@@ -1048,12 +1086,8 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	bool complete = searchQuads();
 	for (const auto &h : kept_)
 		complete = complete || (acceptable(h) && h.missing == 0);
-	const int quad_hyp = hypotheses_, quad_ver = verified_;
 	if (!complete)
 		searchTriangles();
-	if (std::getenv("DP_DEBUG"))
-		std::fprintf(stderr, "search: cand %d quads %d/%d triangles %d/%d\n", n_cand_, quad_hyp, quad_ver,
-			     hypotheses_ - quad_hyp, verified_ - quad_ver);
 
 	result->budget_exhausted = budget_hit_;
 	if (kept_.empty())
@@ -1074,7 +1108,7 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	Hypothesis chosen = kept_[best];
 	result->log10_nfa = chosen.log10_nfa;
 	if (!acceptable(chosen)) {
-		result->error_too_large = chosen.refined.rms_px > config_.max_rms_px &&
+		result->error_too_large = !errorExplained(chosen, 1.0) &&
 					  static_cast<int>(chosen.match.pairs.size()) >= minLeds(false);
 		return false;
 	}
@@ -1084,7 +1118,7 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	 * by the detector, so that count alone must not decide).
 	 */
 	for (std::size_t i = 0; i < kept_.size(); ++i) {
-		if (i == best || !acceptable(kept_[i]))
+		if (i == best || !rival(kept_[i], chosen))
 			continue;
 		const Hypothesis &other = kept_[i];
 		if (other.match.pairs.size() < chosen.match.pairs.size())
@@ -1097,11 +1131,6 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 			symmetric = symmetric || samePose(equivalent, chosen.refined.pose);
 		}
 		if (!symmetric) {
-			if (std::getenv("DP_DEBUG"))
-				std::fprintf(stderr, "ambiguous: chosen k=%zu nfa=%.1f rms=%.3f t=(%.0f %.0f %.0f) other k=%zu nfa=%.1f rms=%.3f t=(%.0f %.0f %.0f) rot=%.1f\n",
-					     chosen.match.pairs.size(), chosen.log10_nfa, chosen.refined.rms_px, chosen.refined.pose.t_mm.x(), chosen.refined.pose.t_mm.y(), chosen.refined.pose.t_mm.z(),
-					     other.match.pairs.size(), other.log10_nfa, other.refined.rms_px, other.refined.pose.t_mm.x(), other.refined.pose.t_mm.y(), other.refined.pose.t_mm.z(),
-					     rotationAngleDeg(other.refined.pose.R, chosen.refined.pose.R));
 			result->ambiguous = true;
 			return false;
 		}
@@ -1148,6 +1177,14 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 		const bool known = blob.cov_uu_px2 > 0.0 && blob.cov_vv_px2 > 0.0;
 		if (!known)
 			cov = floor2 * Eigen::Matrix2d::Identity();
+		/* A spot cut by the frame's edge: its centroid is uncertain by up to its radius. */
+		const CameraIntrinsics &intr = camera_.intrinsics();
+		const bool measured = blob.area_px > 0.0; /* (blobs made by hand may carry no extent) */
+		if (measured && (blob.x_min == 0 || blob.y_min == 0 || blob.x_max + 1 >= intr.width ||
+				 blob.y_max + 1 >= intr.height)) {
+			const double r = 0.5 * std::max(blob.x_max - blob.x_min + 1, blob.y_max - blob.y_min + 1);
+			cov += r * r * Eigen::Matrix2d::Identity();
+		}
 		cov_.push_back(cov);
 		/* The larger eigenvalue of the 2x2 covariance. */
 		const double half_tr = 0.5 * (cov(0, 0) + cov(1, 1));

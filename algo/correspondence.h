@@ -78,6 +78,8 @@ struct CorrespondenceConfig {
 	double track_gate_px = 12.0;
 	/* Acceptance: log10 of the largest number of false alarms (see above). */
 	double max_log10_nfa = -4.0;
+	/* A competitor within this many decades of the chosen pose's NFA makes it ambiguous. */
+	double ambiguity_margin = 3.0;
 	/* Stop the search once a verified pose is this certain. */
 	double early_exit_log10_nfa = -8.0;
 	/* Floors: LEDs a pose must rest on, from the full search and from tracking. */
@@ -92,8 +94,10 @@ struct CorrespondenceConfig {
 	/* Centroid error (px) the invariant screen tolerates beyond the blob's own sigma. */
 	double screen_sigma_px = 1.0;
 	/* Screen at most this many (subset, face, assignment) hypotheses per frame, of them this many from triangles. */
-	int max_hypotheses = 60000;
+	int max_hypotheses = 20000;
 	int max_triangle_hypotheses = 8000;
+	/* ... and verify (refine over all predicted LEDs) at most this many: the search's time bound. */
+	int max_verifications = 400;
 	/* Faces seen more obliquely than this (or from behind) are predicted invisible. */
 	double max_view_angle_deg = 80.0;
 	RefineOptions refine;
@@ -161,6 +165,8 @@ private:
 	bool refineMatched(const Pose &initial, Hypothesis *hypothesis, bool covariance) const;
 	bool acceptable(const Hypothesis &hypothesis) const;
 	bool better(const Hypothesis &a, const Hypothesis &b) const;
+	bool rival(const Hypothesis &other, const Hypothesis &chosen) const;
+	bool errorExplained(const Hypothesis &hypothesis, double slack) const;
 	bool samePose(const Pose &a, const Pose &b) const;
 	double sizePx(const Pose &pose) const;
 	double gatePx(const Pose &pose) const;

@@ -146,10 +146,6 @@ TEST(Correspondence, FindsPoseWithClutterAndHiddenLed)
 				++found;
 				expectPose(truth, r.refined.pose, 1.0, std::max(3.0, 0.01 * z));
 				EXPECT_LT(r.refined.rms_px, 0.5);
-			} else {
-				std::printf("%s miss: trial %d range %.0f hidden %x blobs %zu ambiguous %d rms %d nfa %.1f hyp %d\n",
-					    m.name.c_str(), t, z, hidden, blobs.size(), r.ambiguous, r.error_too_large,
-					    r.log10_nfa, r.hypotheses);
 			}
 		}
 		EXPECT_GE(found, trials * 95 / 100) << m.name;

@@ -19,7 +19,7 @@ using namespace dockpose;
 
 namespace {
 
-struct Scenario {
+struct E2eCase {
 	const char *target;
 	const char *camera;
 	double min_range_mm;
@@ -34,7 +34,7 @@ struct Scenario {
 	int min_correct_percent;
 };
 
-void PrintTo(const Scenario &s, std::ostream *os)
+void PrintTo(const E2eCase &s, std::ostream *os)
 {
 	*os << s.target << " on " << s.camera << ", " << s.min_range_mm << "-" << s.max_range_mm << " mm"
 	    << (s.clutter ? ", clutter" : "");
@@ -51,7 +51,7 @@ bool correctPose(const Pose &truth, const PoseResult &r)
 	       (truth.t_mm - r.t_mm).norm() <= std::max(5.0, 0.02 * truth.t_mm.norm());
 }
 
-class EndToEnd : public ::testing::TestWithParam<Scenario>
+class EndToEnd : public ::testing::TestWithParam<E2eCase>
 {
 };
 
@@ -59,7 +59,7 @@ class EndToEnd : public ::testing::TestWithParam<Scenario>
 
 TEST_P(EndToEnd, CorrectPosesAndNeverAWrongOne)
 {
-	const Scenario s = GetParam();
+	const E2eCase s = GetParam();
 	const auto target = loadTargetModel(dataPath(s.target));
 	const auto camera = loadCameraIntrinsics(dataPath(s.camera));
 	ASSERT_TRUE(target.ok()) << target.error;
@@ -92,12 +92,12 @@ TEST_P(EndToEnd, CorrectPosesAndNeverAWrongOne)
 
 INSTANTIATE_TEST_SUITE_P(
 	Targets, EndToEnd,
-	::testing::Values(Scenario{ "wedge.json", "cam512.json", 150, 2100, false, 120, 99 },
-			  Scenario{ "wedge.json", "cam512.json", 150, 2100, true, 200, 99 },
-			  Scenario{ "corner.json", "cam512.json", 150, 2100, true, 200, 85 },
-			  Scenario{ "wedge.json", "cam1456.json", 300, 2100, true, 80, 98 },
-			  Scenario{ "corner.json", "cam1456.json", 300, 2100, true, 80, 95 }),
-	[](const ::testing::TestParamInfo<Scenario> &param_info) {
+	::testing::Values(E2eCase{ "wedge.json", "cam512.json", 150, 2100, false, 120, 99 },
+			  E2eCase{ "wedge.json", "cam512.json", 150, 2100, true, 200, 99 },
+			  E2eCase{ "corner.json", "cam512.json", 150, 2100, true, 200, 85 },
+			  E2eCase{ "wedge.json", "cam1456.json", 300, 2100, true, 80, 98 },
+			  E2eCase{ "corner.json", "cam1456.json", 300, 2100, true, 80, 95 }),
+	[](const ::testing::TestParamInfo<E2eCase> &param_info) {
 		std::string name = std::string(param_info.param.target).substr(0, std::string(param_info.param.target).find('.')) +
 				   "_" + std::string(param_info.param.camera).substr(0, std::string(param_info.param.camera).find('.'));
 		return name + (param_info.param.clutter ? "_clutter" : "_clean");

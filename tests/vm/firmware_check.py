@@ -43,7 +43,7 @@ POSE_IDS = range(BASE_ID, BASE_ID + 5)
 STATUS_ID = BASE_ID + 5
 HEARTBEAT_ID = BASE_ID + 6
 COMMAND_ID = BASE_ID + 0x10
-DOCKPOSED_IDS = range(BASE_ID, BASE_ID + 7)
+DOCKPOSED_IDS = range(BASE_ID, BASE_ID + 8)
 POSE_MESSAGES = ["DP_Translation", "DP_QuatA", "DP_QuatB", "DP_Angles", "DP_Sigma"]
 # Pose signals compared between architectures, in raw steps (0.1 mm, 0.0001, 0.01 deg).
 POSE_SIGNALS = {
