@@ -126,6 +126,7 @@ void run(const TargetModel &target, const CameraIntrinsics &cam, double range_mi
 				continue;
 			used |= 1ull << best;
 			const Blob &b = blobs[best];
+			model[n] = target.points_mm[i];
 			px[n] = { b.u_px, b.v_px };
 			cov[n] << b.cov_uu_px2, b.cov_uv_px2, b.cov_uv_px2, b.cov_vv_px2;
 			++n;
