@@ -201,8 +201,8 @@ struct PoseData {
 	double t_mm[3]{};			/* X_c = R X_t + t; Tx, Ty: +-3276.7, Tz: 0..6553.5 */
 	double q[4]{ 1, 0, 0, 0 };		/* w x y z */
 	double rpy_deg[3]{};			/* roll, pan, tilt */
-	double sigma_t_mm[3]{};			/* 1-sigma; >= 25.5 is sent as 25.5 (saturated) */
-	double sigma_rpy_deg[3]{};		/* 1-sigma; >= 2.55 is sent as 2.55 (saturated) */
+	double sigma_t_mm[3]{};			/* 1-sigma, sent rounded up; >= 25.5 is sent as 25.5 (saturated) */
+	double sigma_rpy_deg[3]{};		/* 1-sigma, sent rounded up; >= 2.55 is sent as 2.55 (saturated) */
 	/* log10 of the match's number of false alarms (<= -4 when accepted, more
 	 * negative is more certain); resolution 0.1, saturates at -3276.8 and
 	 * 3276.7; NaN is sent as 3276.7 (unknown: no evidence). */
@@ -259,6 +259,22 @@ inline std::int64_t toRaw(double value, double res, std::int64_t lo, std::int64_
 	if (std::isnan(value))
 		return nan_raw;
 	const double r = std::round(value / res);
+	if (r <= static_cast<double>(lo))
+		return lo;
+	if (r >= static_cast<double>(hi))
+		return hi;
+	return static_cast<std::int64_t>(r);
+}
+
+/* As toRaw, but rounded up: for a sigma, whose sent value must never claim more
+ * certainty than the estimate has (a sigma of 0.03 mm goes out as 0.1, not 0). The
+ * 1e-9 step keeps an exact multiple (0.1 / 0.1) on its own step. NaN and a
+ * negative value (no sigma at all) go out as nan_raw: unknown, never "certain". */
+inline std::int64_t toRawUp(double value, double res, std::int64_t lo, std::int64_t hi, std::int64_t nan_raw)
+{
+	if (!(value >= 0.0))
+		return nan_raw;
+	const double r = std::ceil(value / res - 1e-9);
 	if (r <= static_cast<double>(lo))
 		return lo;
 	if (r >= static_cast<double>(hi))
@@ -388,8 +404,8 @@ public:
 					  signedField(toRaw(p.rpy_deg[2], kAngleRes, -32768, 32767, 0), 32, 16));
 			std::uint64_t sigma = 0;
 			for (unsigned int i = 0; i < 3; ++i) {
-				sigma |= signedField(toRaw(p.sigma_t_mm[i], kSigmaTRes, 0, 255, 255), 8 * i, 8);
-				sigma |= signedField(toRaw(p.sigma_rpy_deg[i], kSigmaRpyRes, 0, 255, 255), 24 + 8 * i, 8);
+				sigma |= signedField(toRawUp(p.sigma_t_mm[i], kSigmaTRes, 0, 255, 255), 8 * i, 8);
+				sigma |= signedField(toRawUp(p.sigma_rpy_deg[i], kSigmaRpyRes, 0, 255, 255), 24 + 8 * i, 8);
 			}
 			out[n++] = finish(kSigma, seq, sigma);
 			out[n++] = finish(kQuality, seq,

@@ -36,8 +36,9 @@ namespace {
 constexpr double kTolT = 0.05 + 1e-9;
 constexpr double kTolQ = 5e-5 + 1e-12;
 constexpr double kTolDeg = 0.005 + 1e-9;
-constexpr double kTolSigmaT = 0.05 + 1e-9;
-constexpr double kTolSigmaDeg = 0.005 + 1e-9;
+/* A sigma's steps (it goes out rounded up, see expectSigmaSent). */
+constexpr double kStepSigmaT = 0.1;
+constexpr double kStepSigmaDeg = 0.01;
 constexpr double kTolRms = 0.005 + 1e-9;
 constexpr double kTolLatency = 0.005 + 1e-9;
 constexpr double kTolNfa = 0.05 + 1e-9;
@@ -114,14 +115,22 @@ private:
 unsigned int sequenceOf(const RawFrame &f) { return f.data[6] >> 4; }
 unsigned int aliveOf(const RawFrame &f) { return f.data[6] & 0x0f; }
 
+/* A sigma goes out rounded up: decoded, it is at least what was sent (never more
+ * certain) and less than one step above it (room for the decimal factor's rounding). */
+void expectSigmaSent(double got, double sent, double step)
+{
+	EXPECT_GE(got, sent - 1e-9) << "sigma sent " << sent;
+	EXPECT_LT(got, sent + step + 1e-9) << "sigma sent " << sent;
+}
+
 void expectPoseNear(const PoseData &got, const PoseData &want)
 {
 	EXPECT_EQ(got.frame_counter, want.frame_counter);
 	for (int i = 0; i < 3; ++i) {
 		EXPECT_NEAR(got.t_mm[i], want.t_mm[i], kTolT) << "t " << i;
 		EXPECT_NEAR(got.rpy_deg[i], want.rpy_deg[i], kTolDeg) << "rpy " << i;
-		EXPECT_NEAR(got.sigma_t_mm[i], want.sigma_t_mm[i], kTolSigmaT) << "sigma t " << i;
-		EXPECT_NEAR(got.sigma_rpy_deg[i], want.sigma_rpy_deg[i], kTolSigmaDeg) << "sigma rpy " << i;
+		expectSigmaSent(got.sigma_t_mm[i], want.sigma_t_mm[i], kStepSigmaT);
+		expectSigmaSent(got.sigma_rpy_deg[i], want.sigma_rpy_deg[i], kStepSigmaDeg);
 	}
 	for (int i = 0; i < 4; ++i)
 		EXPECT_NEAR(got.q[i], want.q[i], kTolQ) << "q " << i;
@@ -348,7 +357,7 @@ TEST(CanProtocol, Saturation)
 	EXPECT_DOUBLE_EQ(dec.pose().log10_nfa, -3276.8);	/* at most that */
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[0], 25.5);
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[1], 25.5);	/* NaN: unknown, sent as saturated */
-	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[2], 0.0);
+	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[2], 25.5);	/* negative: no sigma, unknown */
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_rpy_deg[0], 2.55);
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_rpy_deg[1], 2.55);
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_rpy_deg[2], 2.55);
@@ -917,8 +926,8 @@ protected:
 				const char *t_names[3] = { "SigmaTx", "SigmaTy", "SigmaTz" };
 				const char *r_names[3] = { "SigmaRoll", "SigmaPan", "SigmaTilt" };
 				for (int k = 0; k < 3; ++k) {
-					EXPECT_NEAR(val(t_names[k]), clampD(p.sigma_t_mm[k], 0, 25.5), kTolSigmaT);
-					EXPECT_NEAR(val(r_names[k]), clampD(p.sigma_rpy_deg[k], 0, 2.55), kTolSigmaDeg);
+					expectSigmaSent(val(t_names[k]), clampD(p.sigma_t_mm[k], 0, 25.5), kStepSigmaT);
+					expectSigmaSent(val(r_names[k]), clampD(p.sigma_rpy_deg[k], 0, 2.55), kStepSigmaDeg);
 				}
 				break;
 			}
@@ -1014,9 +1023,10 @@ protected:
 			for (std::size_t k = 0; k < 3; ++k) {
 				EXPECT_NEAR(o["t_mm"][k].get<double>(), p.t_mm[k], kTolT);
 				EXPECT_NEAR(o["rpy_deg"][k].get<double>(), p.rpy_deg[k], kTolDeg);
-				EXPECT_NEAR(o["sigma_t_mm"][k].get<double>(), clampD(p.sigma_t_mm[k], 0, 25.5), kTolSigmaT);
-				EXPECT_NEAR(o["sigma_rpy_deg"][k].get<double>(), clampD(p.sigma_rpy_deg[k], 0, 2.55),
-					    kTolSigmaDeg);
+				expectSigmaSent(o["sigma_t_mm"][k].get<double>(), clampD(p.sigma_t_mm[k], 0, 25.5),
+						kStepSigmaT);
+				expectSigmaSent(o["sigma_rpy_deg"][k].get<double>(), clampD(p.sigma_rpy_deg[k], 0, 2.55),
+						kStepSigmaDeg);
 			}
 			for (std::size_t k = 0; k < 4; ++k)
 				EXPECT_NEAR(o["q"][k].get<double>(), p.q[k], kTolQ);
