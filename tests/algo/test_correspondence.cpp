@@ -5,6 +5,7 @@
  * Checks that the right pose is found, that symmetries are folded into one
  * reported pose, and that nothing is reported when the image cannot say.
  */
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -204,6 +205,95 @@ TEST(Correspondence, RandomPointsGiveNoPose)
 			auto blobs = observe(m, cam, makePose(0, 0, 0, 0, 0, 1000), 0x7f, 12, 0.0, rng);
 			CorrespondenceResult r;
 			EXPECT_FALSE(c.solve(blobs, nullptr, &r)) << m.name << " trial " << t;
+		}
+	}
+}
+
+/*
+ * The acceptance is the a-contrario bound and nothing else: an accepted pose's
+ * log10 NFA is at most max_log10_nfa, and the same frame with the bound set just
+ * below that pose's evidence is refused.
+ */
+TEST(Correspondence, TheNfaBoundDecidesAcceptance)
+{
+	std::mt19937 rng(11);
+	const CameraModel cam(cam1456());
+	for (const TargetModel &m : { test::wedgeModel(), corner() }) {
+		int checked = 0;
+		for (int t = 0; t < 12; ++t) {
+			const Pose truth = makePose(10 - 2 * t, 5 + t, 3 * t, 20, -30, 600 + 100 * t);
+			auto blobs = observe(m, cam, truth, 0, 10, 0.1, rng);
+			Correspondence c(m, cam, {});
+			CorrespondenceResult r;
+			if (!c.solve(blobs, nullptr, &r))
+				continue;
+			++checked;
+			EXPECT_LE(r.log10_nfa, CorrespondenceConfig{}.max_log10_nfa) << m.name << " trial " << t;
+			CorrespondenceConfig strict;
+			strict.max_log10_nfa = r.log10_nfa - 1.0;
+			strict.early_exit_log10_nfa = std::min(strict.early_exit_log10_nfa, strict.max_log10_nfa);
+			Correspondence cs(m, cam, strict);
+			CorrespondenceResult rs;
+			EXPECT_FALSE(cs.solve(blobs, nullptr, &rs))
+				<< m.name << " trial " << t << ": accepted at log10 NFA " << rs.log10_nfa
+				<< " with the bound at " << strict.max_log10_nfa;
+		}
+		EXPECT_GE(checked, 10) << m.name;
+	}
+}
+
+/*
+ * The same LEDs among more clutter are weaker evidence: the density of unmatched
+ * points enters the NFA, so the accepted pose's log10 NFA rises (towards the
+ * bound) as clutter is added around it.
+ */
+TEST(Correspondence, ClutterWeakensTheEvidence)
+{
+	std::mt19937 rng(13);
+	const CameraModel cam(cam1456());
+	const TargetModel m = corner();
+	const Pose truth = makePose(8, -12, 20, 15, 10, 700);
+	auto sparse = observe(m, cam, truth, 0, 0, 0.1, rng);
+	auto dense = sparse;
+	std::uniform_real_distribution<double> u(0, cam.intrinsics().width - 1), v(0, cam.intrinsics().height - 1);
+	while (dense.size() < 40) {
+		Blob b;
+		b.u_px = u(rng);
+		b.v_px = v(rng);
+		b.weight = 900;
+		dense.push_back(b);
+	}
+	Correspondence c(m, cam, {});
+	CorrespondenceResult rs, rd;
+	ASSERT_TRUE(c.solve(sparse, nullptr, &rs));
+	ASSERT_TRUE(c.solve(dense, nullptr, &rd));
+	EXPECT_LT(rs.log10_nfa, rd.log10_nfa);
+	expectPose(truth, rd.refined.pose, 1.0, 7.0);
+}
+
+/*
+ * A frame full of random points (the candidate list's capacity) and no target:
+ * the search may test tens of thousands of hypotheses, and none may be accepted.
+ */
+TEST(Correspondence, DenseRandomPointsGiveNoPose)
+{
+	std::mt19937 rng(17);
+	const CameraModel cam(cam1456());
+	std::uniform_real_distribution<double> u(0, cam.intrinsics().width - 1), v(0, cam.intrinsics().height - 1);
+	for (const TargetModel &m : { test::wedgeModel(), corner() }) {
+		Correspondence c(m, cam, {});
+		for (int t = 0; t < 15; ++t) {
+			StaticVector<Blob, kMaxCandidates> blobs;
+			while (blobs.size() < kMaxCandidates) {
+				Blob b;
+				b.u_px = u(rng);
+				b.v_px = v(rng);
+				b.weight = 900;
+				blobs.push_back(b);
+			}
+			CorrespondenceResult r;
+			EXPECT_FALSE(c.solve(blobs, nullptr, &r))
+				<< m.name << " trial " << t << ": log10 NFA " << r.log10_nfa;
 		}
 	}
 }
