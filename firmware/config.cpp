@@ -773,6 +773,7 @@ void readPipeline(Section &pl, PipelineSection *out)
 	if (getChoice(pl, "mode", kTrackModes, &index) == Got::Ok)
 		out->mode = static_cast<TrackMode>(index);
 	getDouble(pl, "max_rms_px", { 0.0, 5.0, true, false }, &out->max_rms_px);
+	getDouble(pl, "max_log10_nfa", { -40.0, -2.0 }, &out->max_log10_nfa);
 	const Got search = getInt(pl, "min_leds_search", 4, kNoLimit, &out->min_leds_search);
 	const Got track = getInt(pl, "min_leds_track", 4, kNoLimit, &out->min_leds_track);
 	getInt(pl, "degraded_hold_frames", 0, 10000, &out->degraded_hold_frames);

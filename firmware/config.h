@@ -85,6 +85,10 @@ struct PipelineSection {
 	std::string target;	/* target JSON */
 	TrackMode mode = TrackMode::Track;
 	double max_rms_px = 0.6;
+	/* Acceptance bound of the full search: log10 of the number of false alarms
+	 * per frame a match may have (docs/vision.md). The defaults here equal
+	 * CorrespondenceConfig's (test_config checks). */
+	double max_log10_nfa = -4.0;
 	int min_leds_search = 4;
 	int min_leds_track = 4;
 	/* Degraded: a pose is still valid but with fewer LEDs than the model has, or

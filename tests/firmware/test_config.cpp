@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "algo/correspondence.h"
 #include "firmware/config.h"
 
 namespace dockpose::firmware {
@@ -406,6 +407,10 @@ const BadFile kBadFiles[] = {
 	  R"({ "pipeline": { "max_rms_px": 0 } })",
 	  nullptr,
 	  { "pipeline.max_rms_px: 0 is out of range (0, 5]" } },
+	{ "max_log10_nfa_not_a_bound",
+	  R"({ "pipeline": { "max_log10_nfa": 0 } })",
+	  nullptr,
+	  { "pipeline.max_log10_nfa: 0 is out of range [-40, -2]" } },
 	{ "lost_after_zero",
 	  R"({ "pipeline": { "lost_after_frames": 0 } })",
 	  nullptr,
@@ -561,6 +566,7 @@ TEST_F(ConfigTest, DefaultsFillIn)
 	EXPECT_EQ(c.can.heartbeat_hz, d.can.heartbeat_hz);
 	EXPECT_EQ(c.pipeline.mode, d.pipeline.mode);
 	EXPECT_EQ(c.pipeline.max_rms_px, d.pipeline.max_rms_px);
+	EXPECT_EQ(c.pipeline.max_log10_nfa, d.pipeline.max_log10_nfa);
 	EXPECT_EQ(c.pipeline.min_leds_search, d.pipeline.min_leds_search);
 	EXPECT_EQ(c.pipeline.min_leds_track, d.pipeline.min_leds_track);
 	EXPECT_EQ(c.pipeline.degraded_hold_frames, d.pipeline.degraded_hold_frames);
@@ -569,6 +575,17 @@ TEST_F(ConfigTest, DefaultsFillIn)
 	/* width/height 0 take the calibration's size. */
 	EXPECT_EQ(c.camera.width, 640);
 	EXPECT_EQ(c.camera.height, 480);
+}
+
+/* The pipeline section's defaults are the correspondence's own: one default each. */
+TEST(PipelineDefaults, EqualTheCorrespondences)
+{
+	const PipelineSection p;
+	const dockpose::CorrespondenceConfig c;
+	EXPECT_EQ(p.max_rms_px, c.max_rms_px);
+	EXPECT_EQ(p.max_log10_nfa, c.max_log10_nfa);
+	EXPECT_EQ(p.min_leds_search, c.min_leds_search);
+	EXPECT_EQ(p.min_leds_track, c.min_leds_track);
 }
 
 TEST_F(ConfigTest, ValuesAreRead)
@@ -585,7 +602,7 @@ TEST_F(ConfigTest, ValuesAreRead)
 			    "mode": "alternate", "pulse_margin_us": 250 },
 		"can": { "backend": "socketcan", "interface": "can1", "base_id": 1024,
 			 "bitrate": 1000000, "tx_queue_depth": 64, "heartbeat_hz": 5 },
-		"pipeline": { "mode": "search_only", "max_rms_px": 1.25, "min_leds_search": 6,
+		"pipeline": { "mode": "search_only", "max_rms_px": 1.25, "max_log10_nfa": -6, "min_leds_search": 6,
 			      "min_leds_track": 5, "degraded_hold_frames": 0, "lost_after_frames": 9 },
 		"systemd": { "notify": false } })"));
 	const ConfigResult r = loadText(doc.dump());
@@ -620,6 +637,7 @@ TEST_F(ConfigTest, ValuesAreRead)
 	EXPECT_EQ(c.can.heartbeat_hz, 5);
 	EXPECT_EQ(c.pipeline.mode, TrackMode::SearchOnly);
 	EXPECT_EQ(c.pipeline.max_rms_px, 1.25);
+	EXPECT_EQ(c.pipeline.max_log10_nfa, -6.0);
 	EXPECT_EQ(c.pipeline.min_leds_search, 6);
 	EXPECT_EQ(c.pipeline.min_leds_track, 5);
 	EXPECT_EQ(c.pipeline.degraded_hold_frames, 0);
