@@ -83,6 +83,39 @@ int quarticRoots(const double c[5], double roots[4])
 	return n;
 }
 
+/*
+ * The rigid transform that takes the model triangle onto the camera-frame
+ * triangle when the two are congruent (P3P's points meet the side lengths to
+ * Newton's precision): orthonormal frames built on both triangles (first axis
+ * along the first edge, third along the normal), R = F_c F_m^T, t through the
+ * centroids. Exact for congruent triangles, where Horn's least squares would
+ * give the same pose through a 4x4 eigen-solve; the caller checks the result
+ * against the rays. False for a degenerate (collinear) triangle.
+ */
+bool triadFit(const Eigen::Vector3d model_mm[3], const Eigen::Vector3d camera_mm[3], Pose *pose)
+{
+	auto frame = [](const Eigen::Vector3d p[3], Eigen::Matrix3d *F) {
+		const Eigen::Vector3d a = p[1] - p[0], b = p[2] - p[0];
+		const Eigen::Vector3d n = a.cross(b);
+		const double na = a.norm(), nn = n.norm();
+		if (!(na > 0.0) || !(nn > 1e-12 * na * b.norm()))
+			return false;
+		const Eigen::Vector3d e1 = a / na, e3 = n / nn;
+		F->col(0) = e1;
+		F->col(1) = e3.cross(e1);
+		F->col(2) = e3;
+		return true;
+	};
+	Eigen::Matrix3d Fm, Fc;
+	if (!frame(model_mm, &Fm) || !frame(camera_mm, &Fc))
+		return false;
+	pose->R = Fc * Fm.transpose();
+	const Eigen::Vector3d m_bar = (model_mm[0] + model_mm[1] + model_mm[2]) / 3.0;
+	const Eigen::Vector3d c_bar = (camera_mm[0] + camera_mm[1] + camera_mm[2]) / 3.0;
+	pose->t_mm = c_bar - pose->R * m_bar;
+	return true;
+}
+
 } /* namespace */
 
 int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pose poses[4])
@@ -156,7 +189,7 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 		for (int i = 0; i < 3; ++i)
 			camera_mm[i] = s[i] * j[i];
 		Pose pose;
-		if (!hornFit(model_mm, camera_mm, 3, &pose) || !pose.R.allFinite() || !pose.t_mm.allFinite())
+		if (!triadFit(model_mm, camera_mm, &pose) || !pose.R.allFinite() || !pose.t_mm.allFinite())
 			continue;
 		/* An ill-conditioned root (rays nearly parallel) may not fit its rays: drop it. */
 		bool fits = true;
