@@ -3,8 +3,9 @@
  * The perspective-three-point problem: the poses that put three known model
  * points on three known viewing rays. Grunert's solution (as reviewed by
  * Haralick et al., IJCV 1994): the ratios of the three depths satisfy a
- * quartic; each real root gives the depths, and Horn's fit of the model to
- * the three camera-frame points gives the pose.
+ * quartic; each real root gives the depths (polished by Newton on the side
+ * lengths), and the rotation between orthonormal frames built on the model
+ * triangle and on the congruent camera-frame triangle (a triad) gives the pose.
  *
  * Units: model points in mm, rays as normalised image coordinates (x, y, 1).
  * Allocates: never (fixed-size Eigen types only).
