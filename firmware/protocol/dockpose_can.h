@@ -252,18 +252,23 @@ constexpr double kLatencyRes = 0.01;
 constexpr double kFrameRateRes = 0.5;
 constexpr double kGainRes = 0.1;
 
+/* A rounded raw value saturated into [lo, hi]. */
+inline std::int64_t clampRaw(double r, std::int64_t lo, std::int64_t hi)
+{
+	if (r <= static_cast<double>(lo))
+		return lo;
+	if (r >= static_cast<double>(hi))
+		return hi;
+	return static_cast<std::int64_t>(r);
+}
+
 /* value / res rounded to the nearest integer and clamped to [lo, hi]; NaN
  * gives `nan_raw`. */
 inline std::int64_t toRaw(double value, double res, std::int64_t lo, std::int64_t hi, std::int64_t nan_raw)
 {
 	if (std::isnan(value))
 		return nan_raw;
-	const double r = std::round(value / res);
-	if (r <= static_cast<double>(lo))
-		return lo;
-	if (r >= static_cast<double>(hi))
-		return hi;
-	return static_cast<std::int64_t>(r);
+	return clampRaw(std::round(value / res), lo, hi);
 }
 
 /* As toRaw, but rounded up: for a sigma, whose sent value must never claim more
@@ -274,12 +279,7 @@ inline std::int64_t toRawUp(double value, double res, std::int64_t lo, std::int6
 {
 	if (!(value >= 0.0))
 		return nan_raw;
-	const double r = std::ceil(value / res - 1e-9);
-	if (r <= static_cast<double>(lo))
-		return lo;
-	if (r >= static_cast<double>(hi))
-		return hi;
-	return static_cast<std::int64_t>(r);
+	return clampRaw(std::ceil(value / res - 1e-9), lo, hi);
 }
 
 /* True when value / res rounds into [lo, hi] (false for NaN and infinities). */
