@@ -252,6 +252,14 @@ class Recording:
 		except OSError:
 			return ""
 
+	def check_no_hang(self):
+		"""The guest's hang.txt (firmware_guest.sh): written only when a bounded wait ran out."""
+		try:
+			text = (self.dir / "hang.txt").read_text(errors="replace")
+		except OSError:
+			text = ""
+		self.c.check(not text, f"{self.label}: nothing hung in the guest (no hang.txt)", text.strip()[:3000])
+
 	def dockposed_rc(self):
 		try:
 			return int((self.dir / "dockposed.rc").read_text().strip())
@@ -389,6 +397,7 @@ def check_board(folder):
 	period = 1.0 / hz
 	log = rec.dockposed_log()
 	rc = rec.dockposed_rc()
+	rec.check_no_hang()
 	c.check(rc == 0, "dockposed exited 0 (SIGTERM from the guest after the last phase)",
 			f"status {rc}; stderr:\n{log}")
 	c.check("camera libcamera" in log and "gpiochip" in log and "socketcan:vcan0" in log,
@@ -655,6 +664,7 @@ def check_replay(truth_path, count, folders):
 		label = pathlib.Path(folder).name
 		rec = Recording(c, folder, label)
 		log = rec.dockposed_log()
+		rec.check_no_hang()
 		c.check(rec.dockposed_rc() == 0 and "the camera has no more frames" in log,
 				f"{label}: dockposed played every frame and exited 0",
 				f"status {rec.dockposed_rc()}; stderr:\n{log}")

@@ -35,6 +35,12 @@
 #   gpioinfo.txt     gpioinfo of the chip while dockposed holds the line
 #   cam-list.txt     cam -l before the run (board: vimc must be listed)
 #   dockposed.out, dockposed.err, dockposed.rc
+#   hang.txt         only when something hung: what (dockposed past --for, past SIGTERM, or
+#                    cam -l), with each of dockposed's threads' state, wchan and syscall
+#                    (/proc) and the kernel log's tail; the host's checks fail on it
+# Every wait is bounded: the phases end MAX_S + SLACK_S s after the start whatever they saw,
+# and dockposed gets TERM_WAIT_S s to exit after SIGTERM before SIGKILL, so that a hang is
+# reported with what hung instead of as the VM's timeout.
 # Exit status: 0 when everything ran (dockposed's own status is in dockposed.rc), 1 when a
 # tool was missing or the recording could not be set up.
 set -u
@@ -89,13 +95,54 @@ can_after() {
 	END { printf "%d %d %d %d\n", hb, rej, changed, constant }' can.log
 }
 
+# (dash has no floating point: whole seconds of /proc/uptime)
+uptime_whole_s() {
+	read -r up _ </proc/uptime
+	echo "${up%.*}"
+}
+
+# hang_report PID WHAT: append to hang.txt what PID's threads are doing, and the kernel log.
+# The syscall numbers are the guest's (aarch64: 98 futex, 29 ioctl, 73 ppoll; x86_64: 202
+# futex, 16 ioctl, 7 poll, 271 ppoll); a wchan names the kernel function a thread sleeps in.
+hang_report() {
+	{
+		echo "$(uptime_s) $2"
+		for t in /proc/"$1"/task/*; do
+			[ -d "$t" ] || continue
+			read -r stat <"$t/stat" 2>/dev/null || stat='? ? ?'
+			state=${stat##*) }
+			echo "  thread ${t##*/} ($(cat "$t/comm" 2>/dev/null)): state ${state%% *}," \
+				"wchan $(cat "$t/wchan" 2>/dev/null), syscall $(cat "$t/syscall" 2>/dev/null)"
+		done
+		echo "  kernel log, last lines:"
+		dmesg 2>/dev/null | tail -n 30 | sed 's/^/    /'
+	} >>"$OUT/hang.txt" 2>&1
+}
+
+# stop_daemon WHY: SIGTERM, up to TERM_WAIT_S s for dockposed to exit, else a hang report
+# and SIGKILL.
+stop_daemon() {
+	kill -TERM "$daemon" 2>/dev/null || return 0
+	waited=0
+	while kill -0 "$daemon" 2>/dev/null; do
+		if [ $waited -ge $((TERM_WAIT_S * 10)) ]; then
+			hang_report "$daemon" "dockposed did not exit within $TERM_WAIT_S s of SIGTERM ($1); SIGKILL"
+			kill -KILL "$daemon" 2>/dev/null
+			return 1
+		fi
+		sleep 0.1
+		waited=$((waited + 1))
+	done
+}
+
 can_lines() {
 	wc -l <can.log | tr -d ' '
 }
 
 # wait_can LINE CONDITION: poll can_after LINE until CONDITION (an arithmetic expression of
 # hb, rej, changed, constant, and samples: the lines of gpio.txt) holds or dockposed has
-# exited; leaves the counts in those names.
+# exited (status 1) or the run's deadline passed (status 2: dockposed ran past its --for);
+# leaves the counts in those names.
 wait_can() {
 	while :; do
 		# shellcheck disable=SC2046 # four numbers
@@ -104,9 +151,18 @@ wait_can() {
 		hb=$3 rej=$4 changed=$5 constant=$6 samples=$(wc -l <gpio.txt)
 		[ $(($2)) -ne 0 ] && return 0
 		kill -0 "$daemon" 2>/dev/null || return 1
+		past_deadline && return 2
 		sleep 0.3
 	done
 }
+
+# past_deadline: the run lasted MAX_S + SLACK_S s (dockposed's own --for is MAX_S).
+past_deadline() {
+	[ "$(uptime_whole_s)" -ge "$deadline_s" ]
+}
+
+SLACK_S=60
+TERM_WAIT_S=30
 
 mode=${1:-}
 [ $# -ge 2 ] || die "usage: firmware_guest.sh board|replay OUT ..."
@@ -126,10 +182,15 @@ done
 line_value=${DOCKPOSE_GPIO_SIM_DIR:?not in a dockpose VM (no DOCKPOSE_GPIO_SIM_DIR)}/sim_gpio3/value
 [ -r "$line_value" ] || die "$line_value: cannot read the gpio-sim line"
 cd "$OUT" || die "cannot cd to $OUT"
-rm -f can.log gpio.txt gpio-after.txt gpioinfo.txt cam-list.txt dockposed.out dockposed.err dockposed.rc
+rm -f can.log gpio.txt gpio-after.txt gpioinfo.txt cam-list.txt dockposed.out dockposed.err dockposed.rc hang.txt
 
 if [ "$mode" = board ]; then
-	cam -l >cam-list.txt 2>&1 || die "cam -l failed: $(cat cam-list.txt)"
+	rc=0
+	timeout "$TERM_WAIT_S" cam -l >cam-list.txt 2>&1 || rc=$?
+	if [ $rc -ne 0 ]; then
+		echo "$(uptime_s) cam -l failed or hung (status $rc, ${TERM_WAIT_S} s at most)" >>hang.txt
+		die "cam -l failed (status $rc): $(cat cam-list.txt)"
+	fi
 fi
 
 # candump first, and proven to be listening: a probe frame (id 0x7ff, not dockpose's) must
@@ -159,6 +220,7 @@ done
 poll=$!
 
 mark start
+deadline_s=$(($(uptime_whole_s) + $5 + SLACK_S))
 "$DOCKPOSED" --board "$BOARD" --for "$5" >dockposed.out 2>dockposed.err &
 daemon=$!
 
@@ -168,6 +230,7 @@ if [ "$mode" = board ]; then
 	# arm64 guest): the phases count from it.
 	until grep -q ' vcan0 306#' can.log; do
 		kill -0 "$daemon" 2>/dev/null || break
+		past_deadline && break
 		sleep 0.1
 	done
 	mark running
@@ -201,12 +264,25 @@ if [ "$mode" = board ]; then
 	from=$(can_lines)
 	s0=$(wc -l <gpio.txt)
 	wait_can "$from" "(hb >= $const_hb && constant >= $const_reports && samples >= $s0 + 30) || hb >= 20 * $const_hb"
+	if past_deadline; then
+		hang_report "$daemon" "the phases were not over $SLACK_S s past --for $5 (heartbeats $hb)"
+	fi
 	mark stop
-	kill -TERM "$daemon" 2>/dev/null
+	stop_daemon "after the constant phase"
 fi
 
-wait "$daemon"
-echo $? >dockposed.rc
+# Replay: dockposed stops when the frames run out (or at --for). Either mode: a dockposed
+# still running at the deadline hung somewhere.
+while kill -0 "$daemon" 2>/dev/null && ! past_deadline; do
+	sleep 0.3
+done
+if kill -0 "$daemon" 2>/dev/null; then
+	hang_report "$daemon" "dockposed still running $SLACK_S s past its --for $5"
+	stop_daemon "past the deadline"
+fi
+rc=0
+wait "$daemon" || rc=$?
+echo $rc >dockposed.rc
 mark exit
 # Let candump take the last frames off the socket, then stop the recorders.
 sleep 0.5

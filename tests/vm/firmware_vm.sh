@@ -89,6 +89,10 @@ in_vm() {
 		echo "-- dockposed's stderr:"
 		cat "$share/dockposed.err"
 	fi
+	if [[ -f $share/hang.txt ]]; then
+		echo "-- what hung in the guest (hang.txt):"
+		cat "$share/hang.txt"
+	fi
 	case $rc in
 	0) ;;
 	77) echo "firmware_vm: the $arch VM cannot run here: skipped" >&2; exit 77 ;;

@@ -29,11 +29,39 @@ struct CommandResult {
 	std::string output;	/* stdout and stderr */
 };
 
-/* Run a shell command, capturing its output. */
-inline CommandResult run(const std::string &command)
+/* A shell word: COMMAND in single quotes. */
+inline std::string shellQuote(const std::string &text)
 {
+	std::string quoted = "'";
+	for (char c : text)
+		quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+	return quoted + "'";
+}
+
+/*
+ * Run a shell command, capturing its output (stdout and stderr). A command still running after
+ * timeout_s is killed (status 124), and the output then ends with what hung: its threads'
+ * state, wchan and syscall from /proc and the kernel log's tail (a hung `cam` in the arm64
+ * guest once cost a whole VM timeout and said nothing).
+ */
+inline CommandResult run(const std::string &command, int timeout_s = 120)
+{
+	const std::string watched = "( " + command + " ) & p=$!; n=0; t=" + std::to_string(timeout_s) +
+		"\nwhile kill -0 $p 2>/dev/null; do\n"
+		"  if [ $n -ge $((t * 10)) ]; then\n"
+		"    echo \"vm_shell: still running after $t s, killed; its threads:\"\n"
+		"    for d in /proc/$p/task/*; do\n"
+		"      echo \"  ${d##*/} $(cat $d/comm) state $(cut -d' ' -f3 $d/stat) wchan $(cat $d/wchan)"
+		" syscall $(cat $d/syscall)\"\n"
+		"    done\n"
+		"    dmesg | tail -n 20\n"
+		"    kill -KILL $p; wait $p; exit 124\n"
+		"  fi\n"
+		"  sleep 0.1; n=$((n + 1))\n"
+		"done\n"
+		"wait $p\n";
 	CommandResult r;
-	FILE *p = popen((command + " 2>&1").c_str(), "r");
+	FILE *p = popen(("sh -c " + shellQuote(watched) + " 2>&1").c_str(), "r");
 	if (!p) {
 		r.output = "popen failed: " + std::string(std::strerror(errno));
 		return r;
