@@ -2,12 +2,18 @@
 /*
  * dockposed: the docking-sensor daemon.
  *
- *   dockposed --board board/sim/board.json [--for SECONDS] [--can-log FILE]
+ *   dockposed --board board/sim/board.json [--for SECONDS] [--can-log FILE] [--startup-timeout S]
  *
  * Exit status: 0 after a clean run (SIGTERM/SIGINT, --for elapsed, replay
  * finished), 1 when the hardware failed (a backend could not start, the camera
- * failed for good), 2 for a bad command line or board file.
+ * failed for good), 2 for a bad command line or board file, 75 (EX_TEMPFAIL)
+ * when start-up did not finish within --startup-timeout seconds (a backend
+ * blocked: a device that never answers, a FIFO with no reader as the CAN log,
+ * a library that deadlocked); stderr names the step. systemd restarts it
+ * (Restart=on-failure) before its own TimeoutStartSec would kill it.
  */
+#include <unistd.h>
+
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -25,6 +31,56 @@ namespace {
 std::atomic<bool> g_stop{ false };
 /* For fatal signals: the LED goes off before the process dies. */
 dockpose::hal::Strobe *g_strobe = nullptr;
+
+/* Start-up's watchdog: the step under way (a string literal), the limit, the status. */
+constexpr int kExitStartupHung = 75;
+std::atomic<const char *> g_startup_step{ "start-up" };
+int g_startup_timeout_s = 20;
+
+void writeAll(const char *text)
+{
+	std::size_t left = std::strlen(text);
+	while (left > 0) {
+		const ssize_t n = ::write(STDERR_FILENO, text, left);
+		if (n <= 0)
+			return;
+		text += n;
+		left -= static_cast<std::size_t>(n);
+	}
+}
+
+/* SIGALRM while starting: async-signal-safe only (write, _exit; the strobe's forceOff is a plain write). */
+void onStartupTimeout(int)
+{
+	if (g_strobe)
+		g_strobe->forceOff();
+	char seconds[16];
+	int n = 0;
+	for (int v = g_startup_timeout_s; v > 0 && n < 15; v /= 10)
+		seconds[n++] = static_cast<char>('0' + v % 10);
+	for (int i = 0; i < n / 2; ++i) {
+		const char c = seconds[i];
+		seconds[i] = seconds[n - 1 - i];
+		seconds[n - 1 - i] = c;
+	}
+	seconds[n] = '\0';
+	writeAll("dockposed: start-up did not finish within ");
+	writeAll(seconds);
+	writeAll(" s (--startup-timeout), stuck ");
+	writeAll(g_startup_step.load());
+	writeAll("; exiting with status 75\n");
+	::_exit(kExitStartupHung);
+}
+
+void armStartupWatchdog(int timeout_s)
+{
+	g_startup_timeout_s = timeout_s;
+	struct sigaction alarm_action {};
+	alarm_action.sa_handler = onStartupTimeout;
+	sigemptyset(&alarm_action.sa_mask);
+	sigaction(SIGALRM, &alarm_action, nullptr);
+	::alarm(static_cast<unsigned>(timeout_s));
+}
 
 void onStopSignal(int)
 {
@@ -87,6 +143,11 @@ int main(int argc, char **argv)
 	app.add_option("--for", run_for_s, "run this many seconds, then shut down cleanly (0: until SIGTERM)")
 		->check(CLI::NonNegativeNumber);
 	app.add_option("--can-log", can_log, "write CAN frames to this candump log (boards whose CAN backend is 'file')");
+	int startup_timeout_s = g_startup_timeout_s;
+	app.add_option("--startup-timeout", startup_timeout_s,
+		       "seconds the backends may take to open and start before dockposed gives up (exit 75)")
+		->check(CLI::Range(1, 600))
+		->capture_default_str();
 	try {
 		app.parse(argc, argv);
 	} catch (const CLI::ParseError &e) {
@@ -140,6 +201,8 @@ int main(int argc, char **argv)
 		config.can.log_file = can_log;
 	}
 
+	armStartupWatchdog(startup_timeout_s);
+	g_startup_step.store("opening the backends (camera, strobe, CAN)");
 	board::Backends wired;
 	if (auto s = info->wire(config, &wired); !s) {
 		std::fprintf(stderr, "dockposed: board %s: %s\n", info->name, s.message().c_str());
@@ -149,12 +212,15 @@ int main(int argc, char **argv)
 	installSignalHandlers();
 	firmware::Daemon daemon(config, std::move(wired));
 	g_strobe = daemon.strobe();
+	g_startup_step.store("starting the camera, strobe and CAN");
 	if (auto s = daemon.start(); !s) {
+		::alarm(0);
 		std::fprintf(stderr, "dockposed: cannot start: %s\n", s.message().c_str());
 		daemon.shutdown();
 		g_strobe = nullptr;
 		return 1;
 	}
+	::alarm(0);
 	const int status = daemon.run(g_stop, run_for_s);
 	daemon.printSummary(stderr);
 	g_strobe = nullptr;

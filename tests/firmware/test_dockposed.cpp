@@ -6,7 +6,10 @@
  */
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
+
+#include <chrono>
 
 #include <cstdio>
 #include <cstdlib>
@@ -175,6 +178,45 @@ TEST_F(Dockposed, TheReferenceBoardFailsCleanlyWithoutItsHardware)
 	r = run("--board " + board + " --for 1");
 	EXPECT_EQ(r.status, 1) << r.err;
 	EXPECT_NE(r.err.find("cannot start: strobe: gpio"), std::string::npos) << r.err;
+}
+
+TEST_F(Dockposed, AStartUpThatBlocksEndsWithStatus75NamingTheStep)
+{
+	/* A FIFO nobody reads as the CAN log: opening it blocks for ever (as a device that never
+	 * answers or a deadlocked library would). dockposed must give up after --startup-timeout,
+	 * LED off, say where it was stuck, and exit 75 for systemd to restart it. */
+	const std::string fifo = dir_ + "/can.fifo";
+	ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+	const auto start = std::chrono::steady_clock::now();
+	const RunResult r = run("--board " + kSimBoard + " --for 30 --startup-timeout 2 --can-log '" + fifo + "'");
+	const double took_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+	EXPECT_EQ(r.status, 75) << r.err;
+	EXPECT_NE(r.err.find("start-up did not finish within 2 s"), std::string::npos) << r.err;
+	EXPECT_NE(r.err.find("stuck starting the camera, strobe and CAN"), std::string::npos) << r.err;
+	EXPECT_GE(took_s, 1.9);
+	EXPECT_LT(took_s, 25.0); /* (a hang guard, not a timing check: --for is 30 s) */
+
+	/* Under systemd, dockposed's own limit comes first: its default is below the unit's
+	 * TimeoutStartSec, so the journal says what was stuck before systemd kills it. */
+	const std::string help = dir_ + "/help.txt";
+	ASSERT_EQ(std::system((kEmulator + DOCKPOSED + std::string(" --help >'") + help + "'").c_str()), 0);
+	const std::string help_text = slurp(help);
+	const std::size_t at = help_text.find("--startup-timeout");
+	ASSERT_NE(at, std::string::npos) << help_text;
+	/* "--startup-timeout INT:INT in [1 - 600]=20" */
+	const std::size_t value = help_text.find("]=", at);
+	ASSERT_NE(value, std::string::npos) << help_text;
+	const int default_s = std::atoi(help_text.c_str() + value + 2);
+	const std::string unit = slurp(kSource + "/firmware/packaging/dockposed.service");
+	const std::size_t key = unit.find("\nTimeoutStartSec=");
+	ASSERT_NE(key, std::string::npos);
+	const int systemd_s = std::atoi(unit.c_str() + key + 17);
+	EXPECT_GE(default_s, 10) << help_text;
+	EXPECT_LT(default_s, systemd_s) << "dockposed --startup-timeout default vs the unit's TimeoutStartSec";
+
+	/* The limit is checked: 0 and non-numbers are refused. */
+	EXPECT_EQ(run("--board " + kSimBoard + " --startup-timeout 0").status, 2);
+	EXPECT_EQ(run("--board " + kSimBoard + " --startup-timeout soon").status, 2);
 }
 
 } /* namespace */
