@@ -259,6 +259,12 @@ class Recording:
 		except OSError:
 			text = ""
 		self.c.check(not text, f"{self.label}: nothing hung in the guest (no hang.txt)", text.strip()[:3000])
+		try:
+			first = (self.dir / "startup-hang.err").read_text(errors="replace")
+		except OSError:
+			return
+		self.c.info(f"{self.label}: dockposed's first start-up blocked (status 75) and it was restarted once, "
+					f"as systemd would; its stderr: {first.strip()[-400:]}")
 
 	def dockposed_rc(self):
 		try:

@@ -35,6 +35,8 @@
 #   gpioinfo.txt     gpioinfo of the chip while dockposed holds the line
 #   cam-list.txt     cam -l before the run (board: vimc must be listed)
 #   dockposed.out, dockposed.err, dockposed.rc
+#   startup-hang.err only when dockposed's first start-up blocked (status 75) and it was
+#                    restarted once: that run's stderr
 #   hang.txt         only when something hung: what (dockposed past --for, past SIGTERM, or
 #                    cam -l), with each of dockposed's threads' state, wchan and syscall
 #                    (/proc) and the kernel log's tail; the host's checks fail on it
@@ -182,7 +184,7 @@ done
 line_value=${DOCKPOSE_GPIO_SIM_DIR:?not in a dockpose VM (no DOCKPOSE_GPIO_SIM_DIR)}/sim_gpio3/value
 [ -r "$line_value" ] || die "$line_value: cannot read the gpio-sim line"
 cd "$OUT" || die "cannot cd to $OUT"
-rm -f can.log gpio.txt gpio-after.txt gpioinfo.txt cam-list.txt dockposed.out dockposed.err dockposed.rc hang.txt
+rm -f can.log gpio.txt gpio-after.txt gpioinfo.txt cam-list.txt dockposed.out dockposed.err dockposed.rc hang.txt startup-hang.err
 
 if [ "$mode" = board ]; then
 	rc=0
@@ -224,15 +226,34 @@ deadline_s=$(($(uptime_whole_s) + $5 + SLACK_S))
 "$DOCKPOSED" --board "$BOARD" --for "$5" >dockposed.out 2>dockposed.err &
 daemon=$!
 
-if [ "$mode" = board ]; then
-	bad=$6 good=$7 alt_hb=$8 hold_hb=$9 reject_tries=${10} const_hb=${11} const_reports=${12}
-	# The first heartbeat (id 0x306) says dockposed has started (starting takes seconds in the
-	# arm64 guest): the phases count from it.
+# The first heartbeat (id 0x306) says dockposed has started (starting takes seconds in the
+# arm64 guest): the phases count from it. A start-up that blocked ends with status 75
+# (dockposed --startup-timeout; libcamera's start has deadlocked now and then in the arm64
+# guest, its threads all waiting on futexes): systemd would restart it (Restart=on-failure),
+# and so does this script, once, keeping the first run's stderr in startup-hang.err.
+restarted=0 reaped=0 rc=0
+while :; do
 	until grep -q ' vcan0 306#' can.log; do
 		kill -0 "$daemon" 2>/dev/null || break
 		past_deadline && break
 		sleep 0.1
 	done
+	grep -q ' vcan0 306#' can.log && break
+	kill -0 "$daemon" 2>/dev/null && break
+	wait "$daemon" || rc=$?
+	reaped=1
+	if [ "$rc" -ne 75 ] || [ $restarted -ne 0 ]; then
+		break
+	fi
+	restarted=1 reaped=0 rc=0
+	mark restart-after-startup-hang
+	cp dockposed.err startup-hang.err
+	"$DOCKPOSED" --board "$BOARD" --for "$5" >dockposed.out 2>dockposed.err &
+	daemon=$!
+done
+
+if [ "$mode" = board ]; then
+	bad=$6 good=$7 alt_hb=$8 hold_hb=$9 reject_tries=${10} const_hb=${11} const_reports=${12}
 	mark running
 	# While dockposed holds the line: the kernel's view of it.
 	gpioinfo "$DOCKPOSE_GPIO_SIM_CHIP" >gpioinfo.txt 2>&1
@@ -280,9 +301,10 @@ if kill -0 "$daemon" 2>/dev/null; then
 	hang_report "$daemon" "dockposed still running $SLACK_S s past its --for $5"
 	stop_daemon "past the deadline"
 fi
-rc=0
-wait "$daemon" || rc=$?
-echo $rc >dockposed.rc
+if [ $reaped -eq 0 ]; then
+	wait "$daemon" || rc=$?
+fi
+echo "$rc" >dockposed.rc
 mark exit
 # Let candump take the last frames off the socket, then stop the recorders.
 sleep 0.5
