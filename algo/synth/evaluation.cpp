@@ -1,5 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 #include "algo/synth/evaluation.h"
+#include "algo/synth/rng.h"
 
 #include <algorithm>
 #include <bit>
@@ -11,33 +12,9 @@ namespace dockpose {
 
 namespace {
 
-std::uint64_t splitmix64(std::uint64_t x)
-{
-	x += 0x9e3779b97f4a7c15ULL;
-	x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-	x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-	return x ^ (x >> 31);
-}
+using synth::Rng;
+using synth::splitmix64;
 
-/* A deterministic stream (mt19937_64 with our own transforms: the same on every library). */
-class Rng
-{
-public:
-	explicit Rng(std::uint64_t seed)
-		: engine_(seed)
-	{
-	}
-
-	double uniform() { return static_cast<double>(engine_() >> 11) * 0x1.0p-53; }
-	double uniform(double a, double b) { return a + (b - a) * uniform(); }
-	/* Uniform integer in [0, n), n > 0. */
-	int index(int n) { return std::min(n - 1, static_cast<int>(uniform() * n)); }
-	bool chance(double p) { return uniform() < p; }
-	std::uint64_t next() { return engine_(); }
-
-private:
-	std::mt19937_64 engine_;
-};
 
 struct ScenarioInfo {
 	Scenario scenario;
@@ -57,6 +34,7 @@ constexpr ScenarioInfo kScenarios[] = {
 	{ Scenario::TwoHidden, "two-hidden" },
 	{ Scenario::TargetFree, "target-free" },
 	{ Scenario::Combined, "combined" },
+	{ Scenario::Scrambled, "scrambled" },
 	{ Scenario::Mix, "mix" },
 };
 
@@ -211,6 +189,14 @@ const char *scenarioName(Scenario scenario)
 	return "unknown";
 }
 
+std::string scenarioNames()
+{
+	std::string names;
+	for (const ScenarioInfo &info : kScenarios)
+		names += (names.empty() ? "" : ", ") + std::string(info.name);
+	return names;
+}
+
 bool parseScenario(const std::string &name, Scenario *scenario)
 {
 	for (const ScenarioInfo &info : kScenarios)
@@ -322,6 +308,10 @@ RenderOptions scenarioOptions(Scenario scenario, std::uint64_t seed)
 		}
 		break;
 	}
+	case Scenario::Scrambled:
+		lightClutter(r, &o);
+		o.scramble = r.uniform(0.3, 0.6);
+		break;
 	}
 	return o;
 }
@@ -352,13 +342,14 @@ EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &came
 	if (!legacy_frames && config.modulo_symmetry)
 		symmetries = modelSymmetries(target, 0.5);
 
-	/* Mix: every scenario but Legacy, target-free weighted. */
+	/* Mix: every scenario but Legacy and Scrambled (the false-alarm test's own), target-free weighted. */
 	std::array<double, kScenarioCount> mix_weight{};
 	double mix_total = 0.0;
 	for (int s = 1; s < kScenarioCount; ++s) {
-		mix_weight[s] = static_cast<Scenario>(s) == Scenario::TargetFree
-					? std::max(0.0, config.mix_target_free_weight)
-					: 1.0;
+		const auto scenario = static_cast<Scenario>(s);
+		mix_weight[s] = scenario == Scenario::TargetFree ? std::max(0.0, config.mix_target_free_weight)
+				: scenario == Scenario::Scrambled ? 0.0
+								   : 1.0;
 		mix_total += mix_weight[s];
 	}
 
@@ -437,8 +428,8 @@ EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &came
 			pipeline.reset();
 		const PoseResult &r = pipeline.process(frame.view());
 		out.result = &r;
-		out.target_free = !out.render.target_drawn;
-		for (int f = 0; f < n_faces && !out.face_complete; ++f) {
+		out.target_free = !out.render.target_drawn || out.render.scrambled;
+		for (int f = 0; f < n_faces && !out.face_complete && !out.target_free; ++f) {
 			const std::uint32_t m = faceMask(target, static_cast<std::size_t>(f));
 			out.face_complete = (out.render.visible_mask & m) == m;
 		}

@@ -50,15 +50,18 @@ enum class Scenario : std::uint8_t {
 	TwoHidden, /* two LEDs hidden */
 	TargetFree, /* clutter of every kind, no target */
 	Combined, /* heavy clutter with several of the effects above at once */
-	Mix, /* one of the scenarios above (not Legacy) drawn per frame */
+	Scrambled, /* the target's LEDs displaced by 15-60 % of its size, light clutter: no true pose */
+	Mix, /* one of the scenarios above (not Legacy, not Scrambled) drawn per frame */
 };
 
-/* Scenarios that frames are rendered in (Legacy .. Combined; Mix only draws them). */
+/* Scenarios that frames are rendered in (Legacy .. Scrambled; Mix only draws them). */
 inline constexpr int kScenarioCount = static_cast<int>(Scenario::Mix);
 /* PoseStatus values tallied (statuses beyond are counted in the last). */
 inline constexpr int kStatusSlots = 16;
 
 const char *scenarioName(Scenario scenario);
+/* Every scenario's name, in order, joined by ", " (for help texts). Allocates: the string. */
+std::string scenarioNames();
 /* Parse a scenario name (as scenarioName() writes it); false when unknown. */
 bool parseScenario(const std::string &name, Scenario *scenario);
 
@@ -105,7 +108,7 @@ struct FrameOutcome {
 	bool correct = false;
 	Scenario scenario = Scenario::Legacy;
 	bool face_complete = false; /* some face has its four LEDs drawn */
-	bool target_free = false; /* no target drawn: any pose found is wrong */
+	bool target_free = false; /* no target drawn, or a scrambled one: any pose found is wrong */
 	bool wrong = false; /* a pose found that is not correct */
 	/* The any-side view (face -1 with the legacy poses) and whether the target fitted in the frame. */
 	int view_face = -1;

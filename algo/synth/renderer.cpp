@@ -42,6 +42,7 @@
  * when *out has the wrong size.
  */
 #include "algo/synth/renderer.h"
+#include "algo/synth/rng.h"
 
 #include <algorithm>
 #include <array>
@@ -74,32 +75,8 @@ constexpr int kPlaceAttempts = 200;
 /* Spots are foreshortened no further than this viewing angle (an LED sitting on an edge). */
 constexpr double kMaxShapeAngleDeg = 85.0;
 
-std::uint64_t splitmix64(std::uint64_t x)
-{
-	x += 0x9e3779b97f4a7c15ULL;
-	x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-	x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-	return x ^ (x >> 31);
-}
-
-/* A deterministic random stream: mt19937_64 with our own transforms. */
-class Rng
-{
-public:
-	explicit Rng(std::uint64_t seed)
-		: engine_(seed)
-	{
-	}
-
-	/* Uniform in [0, 1) with 53 bits. */
-	double uniform() { return static_cast<double>(engine_() >> 11) * 0x1.0p-53; }
-	double uniform(double a, double b) { return a + (b - a) * uniform(); }
-	/* Uniform integer in [0, n), n > 0. */
-	int index(int n) { return std::min(n - 1, static_cast<int>(uniform() * n)); }
-
-private:
-	std::mt19937_64 engine_;
-};
+using synth::Rng;
+using synth::splitmix64;
 
 /* Standard normal CDF and the antiderivative of it. */
 double normalCdf(double z)
@@ -467,12 +444,27 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 	Rng rng_face(splitmix64(seed ^ 0x66616365ULL));
 	Rng rng_dim(splitmix64(seed ^ 0x64696d6dULL));
 	Rng rng_motion(splitmix64(seed ^ 0x6d6f746eULL));
+	Rng rng_scramble(splitmix64(seed ^ 0x7363726dULL));
+
+	/* The LEDs drawn: the model's, or displaced ones on a scrambled frame. */
+	std::array<Eigen::Vector3d, kMaxLeds> led_mm;
+	const bool scrambled = options.scramble > 0.0 && options.draw_target;
+	const double scramble_mm = options.scramble * target_.diameterMm();
+	for (int i = 0; i < n_leds; ++i) {
+		led_mm[i] = target_.points_mm[i];
+		if (!scrambled)
+			continue;
+		Eigen::Vector3d dir(rng_scramble.normal(), rng_scramble.normal(), rng_scramble.normal());
+		if (dir.norm() < 1e-9)
+			dir = Eigen::Vector3d::UnitX();
+		led_mm[i] += dir.normalized() * rng_scramble.uniform(0.5, 1.0) * scramble_mm;
+	}
 
 	/* Where every LED lands, and which ones shine towards the camera. */
 	std::array<Eigen::Vector2d, kMaxLeds> led_px;
 	std::uint32_t drawable = 0;
 	for (int i = 0; i < n_leds; ++i) {
-		const Eigen::Vector3d p = pose.apply(target_.points_mm[i]);
+		const Eigen::Vector3d p = pose.apply(led_mm[i]);
 		Eigen::Vector2d uv;
 		led_px[i] = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
 		if (!camera_.project(p, &uv))
@@ -615,7 +607,7 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 	for (int i = 0; i < n_leds; ++i) {
 		if (!(visible & (1u << i)))
 			continue;
-		const Eigen::Vector3d p = pose.apply(target_.points_mm[i]);
+		const Eigen::Vector3d p = pose.apply(led_mm[i]);
 		const double range = p.norm();
 		const Eigen::Vector3d to_camera = -p / range;
 		/* The LED's normal: the mean of its faces' fronts. */
@@ -1073,6 +1065,7 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 		truth->motion_blur_angle_deg = streaked ? streak_angle * 180.0 / kPi : 0.0;
 		truth->sun_patches = static_cast<int>(patches.size());
 		truth->target_drawn = options.draw_target;
+		truth->scrambled = scrambled;
 	}
 }
 

@@ -160,6 +160,16 @@ struct RenderOptions {
 
 	/* Target-free frame: no LED is drawn, only the scene; clutter may be anywhere. */
 	bool draw_target = true;
+
+	/*
+	 * Scrambled target: every LED is drawn (same brightness, size and
+	 * visibility rule) displaced in 3-D by a random direction and a length
+	 * drawn per LED in [0.5, 1] x scramble x the target's diameter (0: off).
+	 * The frame then holds LEDs at the target's scale that form no rigid
+	 * copy of its geometry except by chance: any pose found on it is wrong
+	 * (RenderTruth::scrambled). The displacements follow the frame's seed.
+	 */
+	double scramble = 0.0;
 };
 
 struct RenderTruth {
@@ -176,6 +186,7 @@ struct RenderTruth {
 	double motion_blur_angle_deg = 0.0; /* the streak's direction, when blurred */
 	int sun_patches = 0; /* sunlit patches drawn */
 	bool target_drawn = true; /* false on a target-free frame */
+	bool scrambled = false; /* the LEDs were drawn displaced (RenderOptions::scramble): no true pose */
 };
 
 class FrameRenderer

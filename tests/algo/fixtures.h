@@ -8,12 +8,22 @@
  */
 #pragma once
 
+#include <string>
+
 #include <Eigen/Core>
 
 #include "algo/camera_model.h"
 #include "algo/target_model.h"
 
 namespace dockpose::test {
+
+#ifdef DOCKPOSE_TEST_DATA
+/* A file of tests/data (the test's build defines DOCKPOSE_TEST_DATA). Allocates: the string. */
+inline std::string dataPath(const std::string &name)
+{
+	return std::string(DOCKPOSE_TEST_DATA) + "/" + name;
+}
+#endif
 
 /* The wedge of method.md section 3: six LEDs, two faces sharing the ridge. */
 inline TargetModel wedgeModel()

@@ -1042,6 +1042,50 @@ TEST(RendererHard, TargetFreeFramesDrawNoLed)
 	EXPECT_GT(in_place, 3);
 }
 
+TEST(RendererHard, ScrambledFramesMoveEveryLedByTheAskedShare)
+{
+	const CameraIntrinsics k = loadCamera("cam512.json");
+	const TargetModel target = loadTarget("wedge.json");
+	FrameRenderer renderer(target, k);
+	RenderOptions o = quiet();
+	const Pose pose = poseAt(k, target, 900, { 5, 10, 0 });
+	Image img;
+	RenderTruth plain, scrambled;
+	renderer.render(pose, o, 3, &img, &plain);
+	EXPECT_FALSE(plain.scrambled);
+	o.scramble = 0.4;
+	const double diameter = target.diameterMm();
+	double shift_sum = 0.0, scale_sum = 0.0;
+	for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+		renderer.render(pose, o, seed, &img, &scrambled);
+		EXPECT_TRUE(scrambled.scrambled);
+		EXPECT_TRUE(scrambled.target_drawn);
+		EXPECT_NE(scrambled.visible_mask, 0u) << "seed " << seed;
+		for (std::size_t i = 0; i < target.points_mm.size(); ++i) {
+			if (!(scrambled.visible_mask & (1u << i)))
+				continue;
+			/* Displaced 0.2-0.4 diameters in 3-D: at least the perpendicular share moves in the image. */
+			const Eigen::Vector2d shift = scrambled.led_px[i] - plain.led_px[i];
+			const double z = pose.apply(target.points_mm[i]).z();
+			EXPECT_LT(shift.norm(), 0.4 * diameter * k.fx / (z - 0.4 * diameter) + 1e-6) << "seed " << seed;
+			shift_sum += shift.norm();
+			scale_sum += 0.3 * diameter * k.fx / z; /* the mean displacement, head on */
+		}
+		/* The LEDs drawn are blobs (two may merge where they land together). */
+		const int blobs = static_cast<int>(components(img, 20).size());
+		EXPECT_GE(blobs, 1) << "seed " << seed;
+		EXPECT_LE(blobs, std::popcount(scrambled.visible_mask)) << "seed " << seed;
+	}
+	/* A random direction keeps on average pi/4 of a displacement across the line of sight. */
+	EXPECT_GT(shift_sum, 0.5 * scale_sum);
+	/* The same seed scrambles the same way; another seed differently. */
+	RenderTruth again;
+	renderer.render(pose, o, 20, &img, &again);
+	EXPECT_EQ(again.led_px[0], scrambled.led_px[0]);
+	renderer.render(pose, o, 21, &img, &again);
+	EXPECT_NE(again.led_px[0], scrambled.led_px[0]);
+}
+
 TEST(RendererHard, ReflectionsNearTheTargetStaySeparateBlobs)
 {
 	const CameraIntrinsics k = loadCamera("cam1456.json");
@@ -1380,15 +1424,19 @@ TEST(Evaluation, ScenariosTallyFaceCompleteAndTargetFreeFrames)
 		misses += m;
 	EXPECT_EQ(st.face_complete_correct + misses, st.face_complete);
 
-	/* Mix: every scenario but legacy comes up. */
+	/* Mix: every scenario but legacy and scrambled comes up. */
 	e.scenario = Scenario::Mix;
 	e.frames = 120;
 	e.min_range_mm = 1200.0; /* small, quick frames */
 	e.max_range_mm = 2000.0;
 	t = evaluate(target, k, PipelineConfig{}, e);
 	EXPECT_EQ(t.scenarios[static_cast<int>(Scenario::Legacy)].frames, 0);
-	for (int s = 1; s < kScenarioCount; ++s)
-		EXPECT_GT(t.scenarios[s].frames, 3) << scenarioName(static_cast<Scenario>(s));
+	EXPECT_EQ(t.scenarios[static_cast<int>(Scenario::Scrambled)].frames, 0);
+	for (int s = 1; s < kScenarioCount; ++s) {
+		if (static_cast<Scenario>(s) != Scenario::Scrambled) {
+			EXPECT_GT(t.scenarios[s].frames, 3) << scenarioName(static_cast<Scenario>(s));
+		}
+	}
 	EXPECT_EQ(t.total.frames, 120);
 	EXPECT_EQ(t.target_free, t.scenarios[static_cast<int>(Scenario::TargetFree)].frames);
 

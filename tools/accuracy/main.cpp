@@ -109,9 +109,8 @@ int main(int argc, char **argv)
 	app.add_flag("--track", e.track, "track between frames instead of solving each frame cold");
 	app.add_option(
 		"--scenario", scenario_list,
-		"comma-separated scenarios, each run for --frames frames: legacy, clean, cluttered, "
-		"heavy-clutter, bloom, blur, dim, sunlit, one-face, two-hidden, target-free, "
-		"combined, mix (one of the others drawn per frame)");
+		"comma-separated scenarios, each run for --frames frames: " + scenarioNames() +
+			" (mix: one of the others but legacy and scrambled drawn per frame)");
 	app.add_flag(
 		"--any-side", e.any_side,
 		"look at a random face from inside its emission cone, any roll, the target anywhere "
