@@ -540,14 +540,23 @@ int Correspondence::minLeds(bool tracking) const
  * 99.9% point of chi^2 with 2k - 6 degrees of freedom under the points'
  * covariances (Wilson-Hilferty), scaled by `slack`.
  */
-bool Correspondence::errorExplained(const Hypothesis &h, double slack) const
+/* The 99.9 % point of chi2 for the fit's degrees of freedom (Wilson-Hilferty). */
+double Correspondence::chi2Bound(const Hypothesis &h) const
 {
-	if (h.refined.rms_px <= slack * config_.max_rms_px)
-		return true;
 	const double dof = std::max(2.0 * static_cast<double>(h.match.pairs.size()) - 6.0, 1.0);
 	const double c = 2.0 / (9.0 * dof);
-	const double q = dof * std::pow(1.0 - c + 3.09 * std::sqrt(c), 3.0);
-	return h.refined.chi2 <= slack * slack * q;
+	return dof * std::pow(1.0 - c + 3.09 * std::sqrt(c), 3.0);
+}
+
+/* The residuals are what the centroids' covariance predicts (chi2 within its 99.9 % point, x slack^2). */
+bool Correspondence::fitStatistical(const Hypothesis &h, double slack) const
+{
+	return h.refined.chi2 <= slack * slack * chi2Bound(h);
+}
+
+bool Correspondence::errorExplained(const Hypothesis &h, double slack) const
+{
+	return h.refined.rms_px <= slack * config_.max_rms_px || fitStatistical(h, slack);
 }
 
 bool Correspondence::acceptable(const Hypothesis &h) const
@@ -567,11 +576,19 @@ bool Correspondence::acceptable(const Hypothesis &h) const
  */
 bool Correspondence::rival(const Hypothesis &other, const Hypothesis &chosen) const
 {
+	/*
+	 * When the chosen pose fits as its centroids' covariance predicts, a
+	 * competitor must fit comparably: chi2 within the bound or 4x the chosen
+	 * pose's (2x its error). The px floor (max_rms_px) stands in for the
+	 * covariance only when the chosen pose does not fit it either (blooms,
+	 * a lens model off): a 0.6 px residual is 40 sigma for a sharp spot.
+	 */
+	const bool comparable = fitStatistical(chosen, 1.0)
+					? fitStatistical(other, 1.0) || other.refined.chi2 <= 4.0 * chosen.refined.chi2
+					: errorExplained(other, 1.0) || other.refined.rms_px <= 2.0 * chosen.refined.rms_px;
 	return static_cast<int>(other.match.pairs.size()) >= minLeds(other.tracked) &&
 	       other.missing <= config_.max_missing &&
-	       (other.match.pairs.size() > chosen.match.pairs.size()
-			? errorExplained(other, 4.0)
-			: errorExplained(other, 1.0) || other.refined.rms_px <= 2.0 * chosen.refined.rms_px) &&
+	       (other.match.pairs.size() > chosen.match.pairs.size() ? errorExplained(other, 4.0) : comparable) &&
 	       other.refined.converged && plausible(other.refined.pose) &&
 	       other.log10_nfa <= std::max(config_.max_log10_nfa, chosen.log10_nfa + config_.ambiguity_margin);
 }
@@ -821,12 +838,20 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
 	if (!refineMatch(pose, 2.0 * gate, minLeds(false), &h))
 		return false;
 	keep(h);
-	/*
-	 * Stop early once a pose is so certain that no chance competitor can
-	 * come close; the structural competitors (near-congruences, the planar
-	 * mirror) are generated explicitly afterwards.
-	 */
-	return acceptable(h) && h.log10_nfa <= config_.early_exit_log10_nfa;
+	return earlyExit(h);
+}
+
+/*
+ * Stop early once a pose is so certain that no chance competitor can come
+ * close, and it fits as its centroids' covariance predicts: a pose that fits
+ * only within the px floor may be a near-congruent copy of the true one (a
+ * box corner half-turned fits six LEDs within 0.6 px at 30 px across), which
+ * the competitors generated afterwards (near-congruences, the planar mirror)
+ * do not always reach from there.
+ */
+bool Correspondence::earlyExit(const Hypothesis &h) const
+{
+	return acceptable(h) && fitStatistical(h, 1.0) && h.log10_nfa <= config_.early_exit_log10_nfa;
 }
 
 /*
@@ -975,7 +1000,7 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
 		if (!refineMatch(pose, gate, minLeds(false), &h))
 			continue;
 		keep(h);
-		if (acceptable(h) && h.log10_nfa <= config_.early_exit_log10_nfa)
+		if (earlyExit(h))
 			return true;
 	}
 	return false;

@@ -46,8 +46,10 @@
  * orientation, is reported.
  *
  * The search stops early once a verified pose's NFA is below
- * early_exit_log10_nfa: no chance competitor can come close, and the
- * structural ones are generated explicitly.
+ * early_exit_log10_nfa and its residuals are what the centroids' covariance
+ * predicts: no chance competitor can come close, and the structural ones are
+ * generated explicitly. (A pose that fits only within max_rms_px does not
+ * stop the search: it may be a near-congruent copy of the true pose.)
  *
  * Tracking: with a previous pose, predicted LED positions are matched first;
  * the full search runs only when that fails.
@@ -167,6 +169,9 @@ private:
 	bool better(const Hypothesis &a, const Hypothesis &b) const;
 	bool rival(const Hypothesis &other, const Hypothesis &chosen) const;
 	bool errorExplained(const Hypothesis &hypothesis, double slack) const;
+	double chi2Bound(const Hypothesis &hypothesis) const;
+	bool fitStatistical(const Hypothesis &hypothesis, double slack) const;
+	bool earlyExit(const Hypothesis &hypothesis) const;
 	bool samePose(const Pose &a, const Pose &b) const;
 	double sizePx(const Pose &pose) const;
 	double gatePx(const Pose &pose) const;
