@@ -4,6 +4,7 @@
 #include "algo/p3p.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -478,25 +479,28 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 	const CameraIntrinsics &intr = camera_.intrinsics();
 	const double frame_area = static_cast<double>(intr.width) * intr.height;
 
-	/* Residuals, the largest centroid sigma, and the matched blobs' extent. */
-	double max_r2 = 0.0, max_var = 0.0;
+	/*
+	 * Each matched LED's tolerance: its residual (inflated: the fit absorbs 6
+	 * of the 2k coordinates), never below twice its centroid's sigma; and the
+	 * matched blobs' extent.
+	 */
+	const double inflate2 = 2.0 * k / (2.0 * k - 6.0);
+	std::array<double, kMaxLeds> tol2{};
 	Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::max());
 	Eigen::Vector2d hi = -lo;
 	std::uint64_t matched = 0;
-	for (const auto &pair : h.match.pairs) {
+	for (std::size_t i = 0; i < h.match.pairs.size(); ++i) {
+		const auto &pair = h.match.pairs[i];
 		Eigen::Vector2d uv;
 		if (!camera_.project(h.refined.pose.apply(target_.points_mm[pair[0]]), &uv))
 			return 0.0;
 		const int j = pair[1];
-		max_r2 = std::max(max_r2, (uv - px_[j]).squaredNorm());
-		max_var = std::max(max_var, var_[j]);
+		tol2[i] = std::max((uv - px_[j]).squaredNorm() * inflate2, 4.0 * var_[j]);
 		lo = lo.cwiseMin(px_[j]);
 		hi = hi.cwiseMax(px_[j]);
 		matched |= std::uint64_t{ 1 } << j;
 	}
-	/* The fit absorbs 6 of the 2k coordinates: inflate the residual accordingly. */
-	const double inflate2 = 2.0 * k / (2.0 * k - 6.0);
-	const double r2 = std::max(max_r2 * inflate2, 4.0 * max_var);
+	std::sort(tol2.begin(), tol2.begin() + k);
 
 	/*
 	 * Density: the frame's candidates, or the unmatched ones in a window of
@@ -513,9 +517,23 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 	const double window_area = std::max((x1 - x0) * (y1 - y0), 1.0);
 	const double rho = std::max(n_cand_ / frame_area, local / window_area);
 
-	const double p = -std::expm1(-rho * kPi * r2);
-	const double tests = h.from_triangle ? log10_triangle_tests_ : log10_quad_tests_;
-	double search = tests + log10Choose(n - 3, k - 3) + (k - 3) * std::log10(std::max(p, 1e-300));
+	/*
+	 * The evidence of the best m of the k matched LEDs (m >= 4), as
+	 * a-contrario RANSAC counts it: a tolerance common to the m tightest
+	 * LEDs, each further one a chance hit within it with probability p, and
+	 * the choice of m one more factor (k - 3). One imprecise LED (a bloomed,
+	 * clipped spot with a sigma of pixels) then weakens only its own share of
+	 * the evidence: with a single tolerance for all k, it made the true box
+	 * corner's six-LED pose (log10 NFA +1.5) lose to a half-turned five-LED one
+	 * that left that spot out (-9.1).
+	 */
+	const double tests = (h.from_triangle ? log10_triangle_tests_ : log10_quad_tests_) +
+			     std::log10(static_cast<double>(k - 3));
+	double search = std::numeric_limits<double>::max();
+	for (int m = 4; m <= k; ++m) {
+		const double p = -std::expm1(-rho * kPi * tol2[m - 1]);
+		search = std::min(search, tests + log10Choose(n - 3, m - 3) + (m - 3) * std::log10(std::max(p, 1e-300)));
+	}
 	if (!h.tracked)
 		return search;
 	/* The prediction's window: one test, every matched LED a chance hit in it. */

@@ -23,15 +23,17 @@
  * Acceptance: an a-contrario false-alarm bound, not an LED count. For a
  * verified pose with k of its n predicted LEDs matched, the number of false
  * alarms is
- *     NFA = N_tests * C(n - 3, k - 3) * p^(k - 3),
- *     p = 1 - exp(-rho * pi * r^2),
+ *     NFA = min over m in 4..k of N_tests * (k - 3) * C(n - 3, m - 3) * p_m^(m - 3),
+ *     p_m = 1 - exp(-rho * pi * r_m^2),
  * the expected number of hypotheses, among the N_tests this frame's
  * candidates allow the search to form, that candidates scattered at random at
  * this frame's density rho would explain as well: three points fix a pose,
- * each further LED must land within r of its prediction. rho is the larger of
- * the frame's candidate density and that of the unmatched candidates around
- * the target; r is the largest matched residual (inflated for the degrees of
- * freedom the fit absorbed), never below twice the largest centroid sigma. A
+ * each further LED must land within r_m of its prediction. rho is the larger
+ * of the frame's candidate density and that of the unmatched candidates
+ * around the target; each LED's tolerance is its residual (inflated for the
+ * degrees of freedom the fit absorbed), never below twice its centroid's
+ * sigma, and r_m is the m-th smallest: the evidence of the best m LEDs, as
+ * a-contrario RANSAC counts it (the choice of m is the factor k - 3). A
  * tracked pose is also tested against its prediction's window (one test,
  * every LED a chance hit within the window), and the smaller of the two,
  * doubled, is its NFA. A pose is accepted when log10 NFA <= max_log10_nfa,
