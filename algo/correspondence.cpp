@@ -852,8 +852,26 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
 	if (verified_ >= config_.max_verifications)
 		return false;
 	++verified_;
+	/*
+	 * The face's own four points first: a closed-form pose may be too rough
+	 * for the normal gate far from the face, so it is matched with a wider
+	 * one; but a wide gate also takes a clutter blob near a predicted LED (47
+	 * px off a wedge's far LED at 372 mm), and the fit it pulls can settle in
+	 * the face's other minimum, leaving the field to its in-plane half turn.
+	 * Refined on its own points and fitting them, the pose gets the normal gate.
+	 */
+	Pose start = pose;
+	double first_gate = 2.0 * gate;
+	RefineOptions own_options = config_.refine;
+	own_options.covariance = false;
+	RefineResult own;
+	if (refinePose(camera_, model, uv, 4, pose, own_options, &own) && own.converged &&
+	    own.rms_px <= config_.max_rms_px) {
+		start = own.pose;
+		first_gate = gatePx(start);
+	}
 	Hypothesis h;
-	if (!refineMatch(pose, 2.0 * gate, minLeds(false), &h))
+	if (!refineMatch(start, first_gate, minLeds(false), &h))
 		return false;
 	keep(h);
 	return earlyExit(h);

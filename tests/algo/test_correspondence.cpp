@@ -358,3 +358,50 @@ TEST(Correspondence, SingleFaceFarAndObliqueIsAmbiguousNotWrong)
 	}
 	EXPECT_GE(near_found, 18);
 }
+
+TEST(Correspondence, AReflectionNearAFarLedDoesNotTurnTheFaceOver)
+{
+	/*
+	 * The blobs (centroids, covariances, weights) the pipeline found in a frame of
+	 * dockpose-accuracy (wedge, 1456 px, legacy seed 42, frame 1347) that gave a wrong pose:
+	 * one face complete at 384 mm, a ridge LED of the other face, its far LED out of sight
+	 * and a reflection 47 px from where it would be. The closed-form pose matched with the
+	 * wide first gate took the reflection, the fit it pulled fell into the face's other
+	 * minimum, and the face turned by half about its normal (48 degrees off) fitted its four
+	 * LEDs exactly. The face's own points refine the pose before it is matched now.
+	 */
+	const CameraModel cam(cam1456());
+	const TargetModel m = test::wedgeModel();
+	Pose truth;
+	truth.R = Eigen::AngleAxisd(0.311398683, Eigen::Vector3d(-0.292763852, 0.944857394, -0.146744105).normalized())
+			  .toRotationMatrix();
+	truth.t_mm = { -18.588317, -9.944561, 384.391099 };
+	const double seen[][6] = {
+		{ 1003.280683, 20.598316, 4.392e-06, 2.529e-08, 4.409e-06, 137892.0 },
+		{ 1014.916880, 633.123788, 4.955e-06, -1.733e-08, 4.955e-06, 126757.0 },
+		{ 580.263460, 667.880826, 8.802e-05, -1.597e-08, 8.815e-05, 122804.0 },
+		{ 571.731519, 290.652240, 8.969e-05, -7.264e-08, 8.980e-05, 114116.0 },
+		{ 1038.663029, 291.278810, 9.130e-05, 1.053e-07, 9.139e-05, 109232.0 },
+		{ 292.413957, 683.856105, 9.815e-05, -3.256e-08, 1.006e-04, 47889.0 },
+		{ 290.402402, 366.189934, 8.399e-05, -4.356e-07, 8.694e-05, 44468.0 },
+	};
+	StaticVector<Blob, kMaxCandidates> blobs;
+	for (const auto &s : seen) {
+		Blob b;
+		b.u_px = s[0];
+		b.v_px = s[1];
+		b.cov_uu_px2 = s[2];
+		b.cov_uv_px2 = s[3];
+		b.cov_vv_px2 = s[4];
+		b.weight = s[5];
+		blobs.push_back(b);
+	}
+	Correspondence c(m, cam, {});
+	CorrespondenceResult r;
+	ASSERT_TRUE(c.solve(blobs, nullptr, &r));
+	EXPECT_EQ(r.match.pairs.size(), 5u);
+	/* The wedge's half turn about its axis is the same pose (a symmetry of the model). */
+	const double direct = rotationAngleDeg(truth.R, r.refined.pose.R);
+	const double turned = rotationAngleDeg(truth.R * c.symmetries().back().transform.R, r.refined.pose.R);
+	EXPECT_LT(std::min(direct, turned), 0.5) << "direct " << direct << " deg, half-turned " << turned << " deg";
+}
