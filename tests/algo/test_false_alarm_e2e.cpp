@@ -41,7 +41,7 @@ struct Count {
 };
 
 Count falsePoses(const char *target_file, const char *camera_file, Scenario scenario, int frames,
-	       double max_log10_nfa, bool any_side, std::uint64_t seed)
+		 double max_log10_nfa, bool any_side, std::uint64_t seed)
 {
 	const auto target = loadTargetModel(test::dataPath(target_file));
 	const auto camera = loadCameraIntrinsics(test::dataPath(camera_file));
@@ -77,9 +77,10 @@ int allowed(int frames, double max_log10_nfa)
 
 void report(const char *what, const Count &run, double max_log10_nfa)
 {
-	std::printf("[ false-alarm ] %s: %d false poses in %d frames at NFA <= 1e%.0f (the bound's mean: %.3g)\n",
-		    what, run.false_poses, run.frames, max_log10_nfa,
-		    run.frames * std::pow(10.0, max_log10_nfa));
+	std::printf(
+		"[ false-alarm ] %s: %d false poses in %d frames at NFA <= 1e%.0f (the bound's mean: %.3g)\n",
+		what, run.false_poses, run.frames, max_log10_nfa,
+		run.frames * std::pow(10.0, max_log10_nfa));
 }
 
 TEST(FalseAlarmBound, NoPoseOnTwoThousandTargetFreeFrames)
@@ -89,7 +90,8 @@ TEST(FalseAlarmBound, NoPoseOnTwoThousandTargetFreeFrames)
 	     { std::tuple{ "wedge.json", "cam512.json", 1000, false },
 	       std::tuple{ "corner.json", "cam512.json", 600, false },
 	       std::tuple{ "pyramid.json", "cam512.json", 400, true } }) {
-		const Count run = falsePoses(target, camera, Scenario::TargetFree, frames, -4.0, any_side, 11);
+		const Count run = falsePoses(target, camera, Scenario::TargetFree, frames, -4.0,
+					     any_side, 11);
 		report(target, run, -4.0);
 		total.frames += run.frames;
 		total.false_poses += run.false_poses;
@@ -102,10 +104,11 @@ TEST(FalseAlarmBound, NoPoseOnTwoThousandTargetFreeFrames)
 TEST(FalseAlarmBound, NoPoseOnScrambledTargets)
 {
 	Count total;
-	for (const auto &[target, frames, any_side] : { std::tuple{ "wedge.json", 300, false },
-							   std::tuple{ "corner.json", 300, false },
-							   std::tuple{ "roof.json", 200, true } }) {
-		const Count run = falsePoses(target, "cam512.json", Scenario::Scrambled, frames, -4.0, any_side, 12);
+	for (const auto &[target, frames, any_side] :
+	     { std::tuple{ "wedge.json", 300, false }, std::tuple{ "corner.json", 300, false },
+	       std::tuple{ "roof.json", 200, true } }) {
+		const Count run = falsePoses(target, "cam512.json", Scenario::Scrambled, frames,
+					     -4.0, any_side, 12);
 		report(target, run, -4.0);
 		total.frames += run.frames;
 		total.false_poses += run.false_poses;
@@ -118,7 +121,8 @@ TEST(FalseAlarmBound, LooserBoundsAdmitNoMoreThanTheyPromise)
 	for (double b : { -1.0, -2.0 }) {
 		for (Scenario scenario : { Scenario::TargetFree, Scenario::Scrambled }) {
 			const int frames = 400;
-			const Count run = falsePoses("wedge.json", "cam512.json", scenario, frames, b, false, 13);
+			const Count run = falsePoses("wedge.json", "cam512.json", scenario, frames,
+						     b, false, 13);
 			report(scenarioName(scenario), run, b);
 			EXPECT_LE(run.false_poses, allowed(frames, b))
 				<< scenarioName(scenario) << " at NFA <= 1e" << b;
