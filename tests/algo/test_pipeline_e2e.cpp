@@ -14,6 +14,7 @@
 #include "algo/io/model_json.h"
 #include "algo/pipeline.h"
 #include "algo/synth/evaluation.h"
+#include "tests/algo/fixtures.h"
 
 using namespace dockpose;
 
@@ -40,10 +41,7 @@ void PrintTo(const E2eCase &s, std::ostream *os)
 	    << (s.clutter ? ", clutter" : "");
 }
 
-std::string dataPath(const std::string &name)
-{
-	return std::string(DOCKPOSE_TEST_DATA) + "/" + name;
-}
+using test::dataPath;
 
 bool correctPose(const Pose &truth, const PoseResult &r)
 {
