@@ -552,13 +552,7 @@ int Correspondence::minLeds(bool tracking) const
 	return std::max(4, std::min(tracking ? config_.min_leds_track : config_.min_leds_search, total));
 }
 
-/*
- * The error measure (method.md section 6): the residuals must be what the
- * centroids' noise explains. Small in pixels (max_rms_px), or within the
- * 99.9% point of chi^2 with 2k - 6 degrees of freedom under the points'
- * covariances (Wilson-Hilferty), scaled by `slack`.
- */
-/* The 99.9 % point of chi2 for the fit's degrees of freedom (Wilson-Hilferty). */
+/* The 99.9 % point of chi2 for the fit's 2k - 6 degrees of freedom (Wilson-Hilferty). */
 double Correspondence::chi2Bound(const Hypothesis &h) const
 {
 	const double dof = std::max(2.0 * static_cast<double>(h.match.pairs.size()) - 6.0, 1.0);
@@ -572,6 +566,11 @@ bool Correspondence::fitStatistical(const Hypothesis &h, double slack) const
 	return h.refined.chi2 <= slack * slack * chi2Bound(h);
 }
 
+/*
+ * The error measure (method.md section 6): the residuals must be what the
+ * centroids' noise explains. Small in pixels (max_rms_px), or within the
+ * 99.9% point of chi^2 under the points' covariances, scaled by `slack`.
+ */
 bool Correspondence::errorExplained(const Hypothesis &h, double slack) const
 {
 	return h.refined.rms_px <= slack * config_.max_rms_px || fitStatistical(h, slack);
