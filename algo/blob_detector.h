@@ -94,6 +94,11 @@ struct BlobFilterConfig {
 	int clip_level = 255;
 };
 
+/* A rectangle of a frame: columns [x0, x1), rows [y0, y1), pixels. */
+struct PixelWindow {
+	int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+
 struct BlobStats {
 	int components = 0;	    /* connected components found */
 	int dropped_small = 0;	    /* specks, single pixels */
@@ -101,6 +106,7 @@ struct BlobStats {
 	int dropped_shape = 0;	    /* elongated or sparse */
 	int dropped_capacity = 0;   /* valid blobs beyond kMaxCandidates (weakest dropped) */
 	bool component_overflow = false; /* more than kMaxComponents: frame too cluttered */
+	bool window_cut = false; /* detectWindows(): a component reaches beyond a window */
 	ThresholdStats threshold;
 };
 
@@ -121,6 +127,21 @@ public:
 	 * component overflow); stats says why. Allocates: never.
 	 */
 	bool detect(const ImageView &image, StaticVector<Blob, kMaxCandidates> *blobs, BlobStats *stats);
+
+	/*
+	 * Tracking with regions of interest: the same as detect(), but reading
+	 * only the pixels of `count` windows (frame coordinates, inside the frame,
+	 * not overlapping), against the level map and noise figure of the last
+	 * successful detect() on a frame of the same size (the background is not
+	 * re-measured: a full detect() now and then refreshes it). A blob comes
+	 * out exactly as detect() would give it on the same map. Returns false,
+	 * and the caller runs detect(), when there is no such map, a window is
+	 * outside the frame, or a component touches a side of its window that
+	 * lies inside the frame (stats->window_cut: it may go on beyond, its
+	 * moments would be partial). Allocates: never.
+	 */
+	bool detectWindows(const ImageView &image, const PixelWindow *windows, std::size_t count,
+			   StaticVector<Blob, kMaxCandidates> *blobs, BlobStats *stats);
 
 	/*
 	 * Lower level, for tests and tools: label `image` against `map` and call
@@ -149,10 +170,16 @@ private:
 	bool labelImpl(const ImageView &image, const ThresholdMap &map);
 	std::size_t componentCount() const;
 	const BlobMoments *components() const;
+	void collect(const ImageView &image, BlobStats *stats,
+		     StaticVector<Blob, kMaxCandidates> *blobs) const;
 
 	Thresholder thresholder_;
 	BlobFilterConfig filter_;
 	Impl *impl_;
+	/* The last successful detect(): its map is thresholder_.map(). */
+	bool reference_ = false;
+	ThresholdStats reference_threshold_;
+	int reference_width_ = 0, reference_height_ = 0;
 };
 
 template<typename Sink>

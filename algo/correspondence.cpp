@@ -457,8 +457,10 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
  */
 double Correspondence::log10Tests(bool triangles) const
 {
-	const double m = n_cand_;
-	const double k = std::min(triangles ? config_.triangle_neighbours : config_.neighbours, std::max(n_cand_ - 1, 0));
+	const int candidates = std::max(n_cand_, context_.frame_candidates);
+	const double m = candidates;
+	const double k = std::min(triangles ? config_.triangle_neighbours : config_.neighbours,
+				  std::max(candidates - 1, 0));
 	const double faces = static_cast<double>(target_.faces.size());
 	const double n = triangles ? m * 0.5 * k * (k - 1.0) * faces * 96.0
 				   : m * k * (k - 1.0) * (k - 2.0) / 6.0 * faces * 8.0;
@@ -515,7 +517,16 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 		    px_[j].y() >= y0 && px_[j].y() <= y1)
 			++local;
 	const double window_area = std::max((x1 - x0) * (y1 - y0), 1.0);
-	const double rho = std::max(n_cand_ / frame_area, local / window_area);
+	double rho = std::max(n_cand_ / frame_area, local / window_area);
+	if (context_.window_area_px2 > 0.0) {
+		/* Only the windows were read: the unmatched blobs in them, or the last whole frame. */
+		int unmatched = 0;
+		for (std::size_t j = 0; j < px_.size(); ++j)
+			if (usable_[j] && !(matched & (std::uint64_t{ 1 } << j)))
+				++unmatched;
+		rho = std::max(context_.frame_candidates / frame_area,
+			       unmatched / context_.window_area_px2);
+	}
 
 	/*
 	 * The evidence of the best m of the k matched LEDs (m >= 4), as
@@ -1208,10 +1219,16 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	return true;
 }
 
+double Correspondence::trackGatePx(const Pose &prediction) const
+{
+	return std::max(config_.track_gate_px, 0.15 * sizePx(prediction));
+}
+
 bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, const Pose *prediction,
-			   CorrespondenceResult *result)
+			   CorrespondenceResult *result, const SolveContext &context)
 {
 	*result = CorrespondenceResult{};
+	context_ = context;
 	hypotheses_ = 0;
 	verified_ = 0;
 	budget_hit_ = false;
@@ -1259,7 +1276,7 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 	if (prediction) {
 		Hypothesis h;
 		h.tracked = true;
-		const double gate = std::max(config_.track_gate_px, 0.15 * sizePx(*prediction));
+		const double gate = trackGatePx(*prediction);
 		h.track_gate_px = gate;
 		if (refineMatch(*prediction, gate, minLeds(true), &h) && acceptable(h) &&
 		    !(planarMatch(h.match) && planarFlipExplains(h))) {
@@ -1277,6 +1294,8 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 		}
 	}
 
+	if (context_.window_area_px2 > 0.0)
+		return false;
 	result->found = fullSearch(prediction, result);
 	result->hypotheses = hypotheses_;
 	result->verified = verified_;

@@ -126,6 +126,24 @@ struct CorrespondenceResult {
 	int verified = 0;	  /* hypotheses verified by projecting all LEDs */
 };
 
+/*
+ * What the caller knows beyond the blobs: with regions of interest
+ * (Pipeline's tracking), the blobs come only from windows around the
+ * predicted LEDs, not from the whole frame.
+ */
+struct SolveContext {
+	/*
+	 * > 0: the blobs come from windows of this many pixels in all. The
+	 * density of chance candidates is then the larger of that of the
+	 * unmatched blobs in the windows and that of the last whole-frame pass;
+	 * the hypotheses a search could form are counted from that pass's
+	 * candidates; only the tracked prediction is tried (a full search on a
+	 * partial frame would miss what lies outside the windows).
+	 */
+	double window_area_px2 = 0.0;
+	int frame_candidates = 0; /* usable candidates of the last whole-frame pass */
+};
+
 class Correspondence
 {
 public:
@@ -136,7 +154,19 @@ public:
 	 * (no track). Allocates: never.
 	 */
 	bool solve(const StaticVector<Blob, kMaxCandidates> &blobs, const Pose *prediction,
-		   CorrespondenceResult *result);
+		   CorrespondenceResult *result, const SolveContext &context = {});
+
+	/*
+	 * Where tracking from `prediction` looks: the LEDs predicted visible
+	 * (bit mask, as led_mask) and the first match's gate, pixels: a blob
+	 * farther than the gate from every predicted LED takes no part in the
+	 * tracked match. Allocates: never.
+	 */
+	std::uint32_t trackedLeds(const Pose &prediction) const
+	{
+		return predictedLeds(prediction, 0.0);
+	}
+	double trackGatePx(const Pose &prediction) const;
 
 	/* Rigid symmetries of the model (identity first): LED permutation and transform. */
 	struct Symmetry {
@@ -238,6 +268,7 @@ private:
 	std::array<std::uint64_t, kMaxCandidates> neighbour_bits_{};
 	std::array<std::array<std::int8_t, kMaxCandidates>, kMaxCandidates> neighbour_list_{};
 	std::array<int, kMaxCandidates> n_neighbours_{};
+	SolveContext context_;
 	double log10_quad_tests_ = 0.0; /* hypotheses the full search can form on this frame */
 	double log10_triangle_tests_ = 0.0;
 	StaticVector<Hypothesis, kMaxKept> kept_;

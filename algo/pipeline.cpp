@@ -42,41 +42,17 @@ void Pipeline::reset()
 	have_track_ = false;
 }
 
-const PoseResult &Pipeline::process(const ImageView &frame)
+namespace {
+
+bool overlapOrTouch(const PixelWindow &a, const PixelWindow &b)
 {
-	result_ = PoseResult{};
-	const CameraIntrinsics &k = camera_.intrinsics();
-	if (!frame.valid() || frame.width != k.width || frame.height != k.height) {
-		result_.status = PoseStatus::NoFrame;
-		have_track_ = false;
-		return result_;
-	}
+	return a.x0 <= b.x1 && b.x0 <= a.x1 && a.y0 <= b.y1 && b.y0 <= a.y1;
+}
 
-	blobs_.clear();
-	if (!detector_.detect(frame, &blobs_, &result_.blob_stats)) {
-		result_.status = result_.blob_stats.component_overflow ? PoseStatus::TooCluttered : PoseStatus::NoFrame;
-		have_track_ = false;
-		return result_;
-	}
-	result_.blobs = static_cast<int>(blobs_.size());
-	if (blobs_.size() < 4) {
-		result_.status = PoseStatus::TooFewBlobs;
-		have_track_ = false;
-		return result_;
-	}
+} /* namespace */
 
-	CorrespondenceResult match;
-	const Pose *prediction = (config_.tracking && have_track_) ? &track_pose_ : nullptr;
-	correspondence_.solve(blobs_, prediction, &match);
-	result_.hypotheses = match.hypotheses;
-	if (!match.found) {
-		result_.status = match.ambiguous	   ? PoseStatus::Ambiguous
-				 : match.error_too_large ? PoseStatus::RefineFailed
-							 : PoseStatus::NoMatch;
-		have_track_ = false;
-		return result_;
-	}
-
+void Pipeline::setFound(const CorrespondenceResult &match)
+{
 	const Pose &pose = match.refined.pose;
 	result_.found = true;
 	result_.status = PoseStatus::Found;
@@ -94,8 +70,150 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 		result_.sigma_t_mm[i] = std::sqrt(std::max(0.0, result_.covariance(i, i)));
 	result_.sigma_rpy_deg = rollPanTiltSigmaDeg(pose.R, result_.covariance);
 
+	/* The largest matched spot: the windows of the next frames must hold it whole. */
+	spot_radius_px_ = 0.0;
+	for (const auto &pair : match.match.pairs) {
+		const Blob &b = blobs_[static_cast<std::size_t>(pair[1])];
+		const int extent = std::max(b.x_max - b.x_min + 1, b.y_max - b.y_min + 1);
+		spot_radius_px_ = std::max(spot_radius_px_, 0.5 * extent);
+	}
+	/* Consecutive poses measure the image motion the next windows follow. */
+	have_previous_ = have_track_;
+	previous_pose_ = track_pose_;
 	track_pose_ = pose;
 	have_track_ = true;
+}
+
+bool Pipeline::processWindows(const ImageView &frame)
+{
+	const CameraIntrinsics &k = camera_.intrinsics();
+	const std::uint32_t leds = correspondence_.trackedLeds(track_pose_);
+	/* Without measured motion: the gate, a spot reaching over its edge still whole inside. */
+	const double gate_half = correspondence_.trackGatePx(track_pose_) + spot_radius_px_ + 2.0;
+	windows_.clear();
+	for (std::size_t i = 0; i < target_.points_mm.size(); ++i) {
+		if (!(leds & (1u << i)))
+			continue;
+		Eigen::Vector2d uv, before;
+		if (!camera_.project(track_pose_.apply(target_.points_mm[i]), &uv))
+			continue;
+		double half = gate_half;
+		if (have_previous_ &&
+		    camera_.project(previous_pose_.apply(target_.points_mm[i]), &before)) {
+			const Eigen::Vector2d motion = uv - before;
+			uv += motion;
+			half = std::min(half, spot_radius_px_ + 2.0 * motion.norm() +
+						      config_.roi_margin_px);
+		}
+		const int h = static_cast<int>(std::ceil(half));
+		const int u = static_cast<int>(std::lround(uv.x()));
+		const int v = static_cast<int>(std::lround(uv.y()));
+		PixelWindow w{ std::max(u - h, 0), std::max(v - h, 0), std::min(u + h + 1, k.width),
+			       std::min(v + h + 1, k.height) };
+		if (w.x0 < w.x1 && w.y0 < w.y1)
+			windows_.push_back(w);
+	}
+	/* Windows that overlap or touch become their bounding box (a spot on the seam stays whole). */
+	for (bool merged = true; merged;) {
+		merged = false;
+		for (std::size_t a = 0; a < windows_.size() && !merged; ++a) {
+			for (std::size_t b = a + 1; b < windows_.size(); ++b) {
+				if (!overlapOrTouch(windows_[a], windows_[b]))
+					continue;
+				PixelWindow &w = windows_[a];
+				const PixelWindow &o = windows_[b];
+				w = PixelWindow{ std::min(w.x0, o.x0), std::min(w.y0, o.y0),
+						 std::max(w.x1, o.x1), std::max(w.y1, o.y1) };
+				windows_[b] = windows_.back();
+				windows_.pop_back();
+				merged = true;
+				break;
+			}
+		}
+	}
+	if (windows_.size() == 0)
+		return false;
+
+	/*
+	 * A spot on the seam between two windows (clutter between LEDs) is cut:
+	 * then one window around them all, and when that cuts a spot too, the
+	 * whole frame.
+	 */
+	BlobStats stats;
+	bool ok = detector_.detectWindows(frame, windows_.data(), windows_.size(), &blobs_, &stats);
+	if (!ok && stats.window_cut && windows_.size() > 1) {
+		PixelWindow all = windows_[0];
+		for (const PixelWindow &w : windows_)
+			all = PixelWindow{ std::min(all.x0, w.x0), std::min(all.y0, w.y0),
+					   std::max(all.x1, w.x1), std::max(all.y1, w.y1) };
+		windows_.clear();
+		windows_.push_back(all);
+		ok = detector_.detectWindows(frame, windows_.data(), windows_.size(), &blobs_,
+					     &stats);
+	}
+	if (!ok || blobs_.size() < 4)
+		return false;
+	double area = 0.0;
+	for (const PixelWindow &w : windows_)
+		area += static_cast<double>(w.x1 - w.x0) * (w.y1 - w.y0);
+	CorrespondenceResult match;
+	if (!correspondence_.solve(blobs_, &track_pose_, &match,
+				   SolveContext{ area, frame_candidates_ }) ||
+	    !match.found)
+		return false;
+	result_.blob_stats = stats;
+	result_.blobs = static_cast<int>(blobs_.size());
+	result_.hypotheses = match.hypotheses;
+	result_.windows = static_cast<int>(windows_.size());
+	setFound(match);
+	return true;
+}
+
+const PoseResult &Pipeline::process(const ImageView &frame)
+{
+	result_ = PoseResult{};
+	const CameraIntrinsics &k = camera_.intrinsics();
+	if (!frame.valid() || frame.width != k.width || frame.height != k.height) {
+		result_.status = PoseStatus::NoFrame;
+		have_track_ = false;
+		return result_;
+	}
+
+	if (config_.tracking && have_track_ && frames_since_full_ + 1 < config_.full_frame_every) {
+		if (processWindows(frame)) {
+			++frames_since_full_;
+			return result_;
+		}
+		result_ = PoseResult{};
+	}
+
+	frames_since_full_ = 0;
+	blobs_.clear();
+	if (!detector_.detect(frame, &blobs_, &result_.blob_stats)) {
+		result_.status = result_.blob_stats.component_overflow ? PoseStatus::TooCluttered : PoseStatus::NoFrame;
+		have_track_ = false;
+		return result_;
+	}
+	result_.blobs = static_cast<int>(blobs_.size());
+	frame_candidates_ = result_.blobs;
+	if (blobs_.size() < 4) {
+		result_.status = PoseStatus::TooFewBlobs;
+		have_track_ = false;
+		return result_;
+	}
+
+	CorrespondenceResult match;
+	const Pose *prediction = (config_.tracking && have_track_) ? &track_pose_ : nullptr;
+	correspondence_.solve(blobs_, prediction, &match);
+	result_.hypotheses = match.hypotheses;
+	if (!match.found) {
+		result_.status = match.ambiguous	   ? PoseStatus::Ambiguous
+				 : match.error_too_large ? PoseStatus::RefineFailed
+							 : PoseStatus::NoMatch;
+		have_track_ = false;
+		return result_;
+	}
+	setFound(match);
 	return result_;
 }
 

@@ -53,6 +53,7 @@ struct PoseResult {
 	Eigen::Vector3d sigma_t_mm = Eigen::Vector3d::Zero();
 	Eigen::Vector3d sigma_rpy_deg = Eigen::Vector3d::Zero();
 	bool tracked = false; /* found by the tracking path (prediction from the last pose) */
+	int windows = 0; /* regions of interest read (0: the whole frame was read) */
 	int blobs = 0;	      /* candidates after the shape filter */
 	int hypotheses = 0;   /* hypotheses scored */
 	BlobStats blob_stats;
@@ -64,6 +65,23 @@ struct PipelineConfig {
 	CorrespondenceConfig correspondence;
 	RefineOptions refine;
 	bool tracking = true; /* predict from the last pose, full search when lost */
+	/*
+	 * Tracking with regions of interest: while a pose is tracked, only
+	 * windows around the predicted LEDs are read, and every
+	 * full_frame_every-th frame the whole frame, to re-measure the
+	 * background, the noise and the clutter density that acceptance uses.
+	 * A frame whose windows fail (a spot cut by a window's side, too few
+	 * blobs, no tracked match) is read whole at once, as without windows.
+	 * 1: the whole frame every frame.
+	 *
+	 * A window is centred where the LED's last image motion carries it
+	 * (constant velocity in the image) and reaches beyond the LEDs' last spot
+	 * radius by twice that motion plus roi_margin_px (pixels): a change of
+	 * speed up to the speed itself stays inside. After the first pose of a
+	 * track (no motion measured yet) it covers the tracked match's gate.
+	 */
+	int full_frame_every = 30;
+	double roi_margin_px = 6.0;
 };
 
 class Pipeline
@@ -84,6 +102,10 @@ public:
 	const PoseResult &last() const { return result_; }
 
 private:
+	/* The regions-of-interest pass of one tracked frame; false: read the whole frame. */
+	bool processWindows(const ImageView &frame);
+	void setFound(const CorrespondenceResult &match);
+
 	TargetModel target_;
 	CameraModel camera_;
 	PipelineConfig config_;
@@ -93,6 +115,13 @@ private:
 	PoseResult result_;
 	bool have_track_ = false;
 	Pose track_pose_;
+	bool have_previous_ = false; /* the pose of the frame before track_pose_'s */
+	Pose previous_pose_;
+	/* Regions of interest: this frame's windows, the last whole-frame pass, the spots' radius. */
+	StaticVector<PixelWindow, kMaxLeds> windows_;
+	int frames_since_full_ = 0;
+	int frame_candidates_ = 0;
+	double spot_radius_px_ = 0.0;
 };
 
 } /* namespace dockpose */

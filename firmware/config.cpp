@@ -776,6 +776,7 @@ void readPipeline(Section &pl, PipelineSection *out)
 	getDouble(pl, "max_log10_nfa", { -40.0, -2.0 }, &out->max_log10_nfa);
 	const Got search = getInt(pl, "min_leds_search", 4, kNoLimit, &out->min_leds_search);
 	const Got track = getInt(pl, "min_leds_track", 4, kNoLimit, &out->min_leds_track);
+	getInt(pl, "full_frame_every", 1, 10000, &out->full_frame_every);
 	getInt(pl, "degraded_hold_frames", 0, 10000, &out->degraded_hold_frames);
 	getInt(pl, "lost_after_frames", 1, 1000, &out->lost_after_frames);
 	pl.finish();

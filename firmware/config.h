@@ -91,6 +91,9 @@ struct PipelineSection {
 	double max_log10_nfa = -4.0;
 	int min_leds_search = 4;
 	int min_leds_track = 4;
+	/* While tracking, every this many frames one is read whole; between, only
+	 * windows around the predicted LEDs (PipelineConfig::full_frame_every). */
+	int full_frame_every = 30;
 	/* Degraded: a pose is still valid but with fewer LEDs than the model has, or
 	 * poses were lost within the last `degraded_hold_frames` frames. */
 	int degraded_hold_frames = 30;

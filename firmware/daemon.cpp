@@ -61,6 +61,7 @@ PipelineConfig pipelineConfig(const PipelineSection &section)
 		std::min(config.correspondence.early_exit_log10_nfa, section.max_log10_nfa);
 	config.correspondence.min_leds_search = section.min_leds_search;
 	config.correspondence.min_leds_track = section.min_leds_track;
+	config.full_frame_every = section.full_frame_every;
 	return config;
 }
 

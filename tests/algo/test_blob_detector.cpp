@@ -677,3 +677,133 @@ TEST(BlobFilter, AreaLimitsAndCapacity)
 	EXPECT_EQ(blobs[0].area_px, 900.0);
 	EXPECT_EQ(stats.dropped_small, 100);
 }
+
+namespace {
+
+/* Smooth discs of radius 3 at random places on a noisy, sloping background (auto threshold). */
+StridedFrame spotsFrame(int w, int h, int spots, unsigned seed,
+			std::vector<Eigen::Vector2d> *centres)
+{
+	StridedFrame f(w, h, w + 13);
+	std::mt19937 rng(seed);
+	std::normal_distribution<double> noise(0.0, 2.0);
+	for (int y = 0; y < h; ++y)
+		for (int x = 0; x < w; ++x)
+			f.at(x, y) = static_cast<std::uint8_t>(
+				std::clamp(30.0 + 0.05 * x + noise(rng), 0.0, 255.0));
+	std::uniform_real_distribution<double> ux(8.0, w - 9.0), uy(8.0, h - 9.0);
+	for (int s = 0; s < spots; ++s) {
+		const Eigen::Vector2d c{ ux(rng), uy(rng) };
+		centres->push_back(c);
+		for (int y = static_cast<int>(c.y()) - 5; y <= static_cast<int>(c.y()) + 5; ++y)
+			for (int x = static_cast<int>(c.x()) - 5; x <= static_cast<int>(c.x()) + 5;
+			     ++x) {
+				const double d2 =
+					(x - c.x()) * (x - c.x()) + (y - c.y()) * (y - c.y());
+				if (d2 <= 9.0)
+					f.at(x, y) = static_cast<std::uint8_t>(
+						220 - static_cast<int>(10 * d2));
+			}
+	}
+	return f;
+}
+
+bool sameBlob(const Blob &a, const Blob &b)
+{
+	return a.u_px == b.u_px && a.v_px == b.v_px && a.area_px == b.area_px &&
+	       a.weight == b.weight && a.cov_uu_px2 == b.cov_uu_px2 &&
+	       a.cov_uv_px2 == b.cov_uv_px2 && a.cov_vv_px2 == b.cov_vv_px2 && a.x_min == b.x_min &&
+	       a.y_max == b.y_max && a.peak == b.peak;
+}
+
+} /* namespace */
+
+TEST(BlobWindows, GiveExactlyTheBlobsOfTheWholeFrameInsideThem)
+{
+	int compared = 0;
+	for (unsigned seed = 1; seed <= 20; ++seed) {
+		std::vector<Eigen::Vector2d> centres;
+		const StridedFrame f = spotsFrame(700, 500, 12, seed, &centres);
+		BlobDetector det(700, 500, ThresholdConfig{}, BlobFilterConfig{});
+		StaticVector<Blob, kMaxCandidates> whole, windowed;
+		BlobStats stats;
+		ASSERT_TRUE(det.detect(f.view(), &whole, &stats));
+		/* Windows around every other whole-frame blob, of odd sizes at odd places. */
+		std::vector<PixelWindow> windows;
+		std::vector<Blob> expected;
+		for (std::size_t i = 0; i < whole.size(); i += 2) {
+			const int u = static_cast<int>(whole[i].u_px),
+				  v = static_cast<int>(whole[i].v_px);
+			const int half = 9 + static_cast<int>((seed + i) % 40);
+			const PixelWindow w{ std::max(u - half, 0), std::max(v - half - 1, 0),
+					     std::min(u + half + 3, 700), std::min(v + half, 500) };
+			bool overlaps = false;
+			for (const PixelWindow &o : windows)
+				overlaps |= w.x0 <= o.x1 && o.x0 <= w.x1 && w.y0 <= o.y1 &&
+					    o.y0 <= w.y1;
+			if (overlaps)
+				continue;
+			windows.push_back(w);
+		}
+		for (const Blob &b : whole)
+			for (const PixelWindow &w : windows)
+				if (b.x_min >= w.x0 && b.x_max < w.x1 && b.y_min >= w.y0 &&
+				    b.y_max < w.y1)
+					expected.push_back(b);
+		const bool ok = det.detectWindows(f.view(), windows.data(), windows.size(),
+						  &windowed, &stats);
+		if (!ok) {
+			/* Only a spot crossing a window's side may refuse the windows. */
+			EXPECT_TRUE(stats.window_cut) << seed;
+			continue;
+		}
+		ASSERT_EQ(windowed.size(), expected.size()) << seed;
+		compared += static_cast<int>(expected.size());
+		for (const Blob &b : expected) {
+			const bool found =
+				std::any_of(windowed.begin(), windowed.end(),
+					    [&](const Blob &o) { return sameBlob(o, b); });
+			EXPECT_TRUE(found) << seed << " blob at " << b.u_px << ", " << b.v_px;
+		}
+	}
+	EXPECT_GE(compared, 60); /* most frames' windows were read, not refused */
+}
+
+TEST(BlobWindows, RefuseACutSpotAFrameWithoutReferenceAndBadWindows)
+{
+	std::vector<Eigen::Vector2d> centres;
+	const StridedFrame f = spotsFrame(300, 200, 1, 5, &centres);
+	BlobDetector det(300, 200, ThresholdConfig{}, BlobFilterConfig{});
+	StaticVector<Blob, kMaxCandidates> blobs;
+	BlobStats stats;
+	const int u = static_cast<int>(centres[0].x()), v = static_cast<int>(centres[0].y());
+	const PixelWindow around{ u - 8, v - 8, u + 9, v + 9 };
+	/* No detect() yet: no level map to read the windows against. */
+	EXPECT_FALSE(det.detectWindows(f.view(), &around, 1, &blobs, &stats));
+	ASSERT_TRUE(det.detect(f.view(), &blobs, &stats));
+	ASSERT_EQ(blobs.size(), 1u);
+	const Blob spot = blobs[0];
+
+	ASSERT_TRUE(det.detectWindows(f.view(), &around, 1, &blobs, &stats));
+	ASSERT_EQ(blobs.size(), 1u);
+	EXPECT_TRUE(sameBlob(blobs[0], spot));
+	EXPECT_EQ(stats.components, 1);
+
+	/* The window's side through the spot: refused, not a partial blob. */
+	const PixelWindow cut{ u - 8, v - 8, u + 1, v + 9 };
+	EXPECT_FALSE(det.detectWindows(f.view(), &cut, 1, &blobs, &stats));
+	EXPECT_TRUE(stats.window_cut);
+	EXPECT_EQ(blobs.size(), 0u);
+
+	/* A window beyond the frame, an empty one, and a frame of another size. */
+	const PixelWindow outside{ 290, 190, 310, 210 };
+	EXPECT_FALSE(det.detectWindows(f.view(), &outside, 1, &blobs, &stats));
+	const PixelWindow empty{ 10, 10, 10, 20 };
+	EXPECT_FALSE(det.detectWindows(f.view(), &empty, 1, &blobs, &stats));
+	const StridedFrame smaller(200, 100, 200);
+	EXPECT_FALSE(det.detectWindows(smaller.view(), &around, 1, &blobs, &stats));
+
+	/* A window that only touches the frame's own edge is fine (nothing lies beyond). */
+	const PixelWindow corner{ 0, 0, 40, 40 };
+	EXPECT_TRUE(det.detectWindows(f.view(), &corner, 1, &blobs, &stats));
+}

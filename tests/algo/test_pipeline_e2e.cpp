@@ -127,6 +127,75 @@ TEST(EndToEndTracking, ApproachIsTrackedFrameToFrame)
 	EXPECT_GE(tracked, n - 2); /* all but the first frame(s) come from the prediction */
 }
 
+/*
+ * Regions of interest give the poses the whole frame gives: the same approach
+ * through two pipelines, one reading windows (a whole frame every
+ * full_frame_every-th), one reading every frame whole; with a jump the
+ * windows cannot follow, a reflection appearing next to an LED, and a frame
+ * without the target.
+ */
+TEST(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
+{
+	const auto target = loadTargetModel(dataPath("wedge.json"));
+	const auto camera = loadCameraIntrinsics(dataPath("cam1456.json"));
+	ASSERT_TRUE(target.ok() && camera.ok());
+	FrameRenderer renderer(target.value, camera.value);
+	PipelineConfig whole_config;
+	whole_config.full_frame_every = 1;
+	Pipeline windows(target.value, camera.value);
+	Pipeline whole(target.value, camera.value, whole_config);
+	const int every = PipelineConfig{}.full_frame_every;
+	Image frame;
+	int windowed = 0, found = 0, in_a_row = 0;
+	const int n = 90;
+	const int jump = 50, empty = 70;
+	for (int i = 0; i < n; ++i) {
+		const double range = 1600.0 - 8.0 * i;
+		/* At the jump the target leaps sideways by a fifth of the frame: far beyond every window. */
+		const double u_frac = 0.4 + 0.001 * i + (i >= jump ? 0.2 : 0.0);
+		const Pose truth = poseAt(camera.value, target.value, range,
+					  { 10.0 - 0.2 * i, -8.0 + 0.15 * i, 4.0 }, u_frac, 0.55);
+		RenderOptions o;
+		o.reflections = 4;
+		o.glints = 1;
+		o.noise_sigma = 2.0;
+		o.gradient = 15.0;
+		o.clutter_seed = 99; /* the scene stays; the target moves through it */
+		if (i >= 30 && i < 40)
+			o.near_reflections = 2; /* new reflections next to the LEDs */
+		if (i == empty)
+			o.occlusion_mask = 0xffffu;
+		renderer.render(truth, o, 500 + i, &frame);
+		const PoseResult a = windows.process(frame.view());
+		const PoseResult &b = whole.process(frame.view());
+		ASSERT_EQ(a.found, b.found) << "frame " << i;
+		if (i == empty) {
+			EXPECT_FALSE(a.found);
+			continue;
+		}
+		if (i == jump || i == empty + 1) {
+			EXPECT_EQ(a.windows, 0)
+				<< "frame " << i << ": the windows cannot hold the target";
+		}
+		/* At most every - 1 frames in a row from windows: then a whole frame. */
+		in_a_row = a.windows > 0 ? in_a_row + 1 : 0;
+		EXPECT_LT(in_a_row, every) << "frame " << i;
+		if (!a.found)
+			continue;
+		++found;
+		windowed += a.windows > 0 ? 1 : 0;
+		EXPECT_TRUE(correctPose(truth, a)) << "frame " << i;
+		EXPECT_EQ(a.led_mask, b.led_mask) << "frame " << i;
+		/* The same pose to a small share of its own sigma. */
+		for (int k = 0; k < 3; ++k)
+			EXPECT_LE(std::abs(a.t_mm[k] - b.t_mm[k]), 0.5 * b.sigma_t_mm[k] + 1e-6)
+				<< "frame " << i << " axis " << k;
+		EXPECT_NEAR(a.log10_nfa, b.log10_nfa, 1.0) << "frame " << i;
+	}
+	EXPECT_GE(found, n - 3);
+	EXPECT_GE(windowed, found * 8 / 10);
+}
+
 TEST(EndToEndFailures, EmptyAndWrongSizedFramesGiveNoPose)
 {
 	const auto target = loadTargetModel(dataPath("wedge.json"));

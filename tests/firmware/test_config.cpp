@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "algo/correspondence.h"
+#include "algo/pipeline.h"
 #include "firmware/config.h"
 
 namespace dockpose::firmware {
@@ -569,6 +570,7 @@ TEST_F(ConfigTest, DefaultsFillIn)
 	EXPECT_EQ(c.pipeline.max_log10_nfa, d.pipeline.max_log10_nfa);
 	EXPECT_EQ(c.pipeline.min_leds_search, d.pipeline.min_leds_search);
 	EXPECT_EQ(c.pipeline.min_leds_track, d.pipeline.min_leds_track);
+	EXPECT_EQ(c.pipeline.full_frame_every, d.pipeline.full_frame_every);
 	EXPECT_EQ(c.pipeline.degraded_hold_frames, d.pipeline.degraded_hold_frames);
 	EXPECT_EQ(c.pipeline.lost_after_frames, d.pipeline.lost_after_frames);
 	EXPECT_EQ(c.systemd.notify, d.systemd.notify);
@@ -586,6 +588,7 @@ TEST(PipelineDefaults, EqualTheCorrespondences)
 	EXPECT_EQ(p.max_log10_nfa, c.max_log10_nfa);
 	EXPECT_EQ(p.min_leds_search, c.min_leds_search);
 	EXPECT_EQ(p.min_leds_track, c.min_leds_track);
+	EXPECT_EQ(p.full_frame_every, dockpose::PipelineConfig{}.full_frame_every);
 }
 
 TEST_F(ConfigTest, ValuesAreRead)
@@ -603,7 +606,8 @@ TEST_F(ConfigTest, ValuesAreRead)
 		"can": { "backend": "socketcan", "interface": "can1", "base_id": 1024,
 			 "bitrate": 1000000, "tx_queue_depth": 64, "heartbeat_hz": 5 },
 		"pipeline": { "mode": "search_only", "max_rms_px": 1.25, "max_log10_nfa": -6, "min_leds_search": 6,
-			      "min_leds_track": 5, "degraded_hold_frames": 0, "lost_after_frames": 9 },
+			      "min_leds_track": 5, "full_frame_every": 7, "degraded_hold_frames": 0,
+			      "lost_after_frames": 9 },
 		"systemd": { "notify": false } })"));
 	const ConfigResult r = loadText(doc.dump());
 	ASSERT_TRUE(r.ok()) << joinErrors(r.errors);
@@ -640,6 +644,7 @@ TEST_F(ConfigTest, ValuesAreRead)
 	EXPECT_EQ(c.pipeline.max_log10_nfa, -6.0);
 	EXPECT_EQ(c.pipeline.min_leds_search, 6);
 	EXPECT_EQ(c.pipeline.min_leds_track, 5);
+	EXPECT_EQ(c.pipeline.full_frame_every, 7);
 	EXPECT_EQ(c.pipeline.degraded_hold_frames, 0);
 	EXPECT_EQ(c.pipeline.lost_after_frames, 9);
 	EXPECT_FALSE(c.systemd.notify);
