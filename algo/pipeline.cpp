@@ -179,7 +179,10 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 		return result_;
 	}
 
-	if (config_.tracking && have_track_ && frames_since_full_ + 1 < config_.full_frame_every) {
+	const bool whole = whole_frames_ > 0;
+	whole_frames_ = std::max(whole_frames_ - 1, 0);
+	if (config_.tracking && have_track_ && !whole &&
+	    frames_since_full_ + 1 < config_.full_frame_every) {
 		if (processWindows(frame)) {
 			++frames_since_full_;
 			return result_;

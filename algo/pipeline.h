@@ -7,6 +7,7 @@
  */
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 
 #include <Eigen/Core>
@@ -96,6 +97,13 @@ public:
 	/* Forget the tracked pose (next frame runs the full search). */
 	void reset();
 
+	/*
+	 * Read the next `frames` frames whole, not through windows: the light
+	 * changed (exposure, gain, strobe mode), so the last whole frame's
+	 * background and noise no longer hold. Allocates: never.
+	 */
+	void readWhole(int frames) { whole_frames_ = std::max(whole_frames_, frames); }
+
 	const CameraModel &camera() const { return camera_; }
 	const TargetModel &target() const { return target_; }
 	const StaticVector<Blob, kMaxCandidates> &blobs() const { return blobs_; }
@@ -120,6 +128,7 @@ private:
 	/* Regions of interest: this frame's windows, the last whole-frame pass, the spots' radius. */
 	StaticVector<PixelWindow, kMaxLeds> windows_;
 	int frames_since_full_ = 0;
+	int whole_frames_ = 0; /* readWhole(): frames still to read whole */
 	int frame_candidates_ = 0;
 	double spot_radius_px_ = 0.0;
 };

@@ -22,6 +22,12 @@ constexpr std::int64_t kFaultHoldNs = 1 * kNsPerS;
 constexpr int kWaitSliceMs = 20;
 /* A stalled camera is restarted at most this often. */
 constexpr std::int64_t kRestartIntervalNs = 2 * kNsPerS;
+/*
+ * After a change of exposure, gain or strobe mode the pipeline reads this
+ * many frames whole (not through windows): new controls reach the sensor a
+ * few frames late, and the background they give must be re-measured.
+ */
+constexpr int kWholeFramesAfterLightChange = 4;
 
 can::StrobeMode toCan(StrobeMode mode)
 {
@@ -538,6 +544,7 @@ void Daemon::applyCommand(const can::CommandData &command)
 		if (auto s = backends_.camera->setControls(exposure_us, gain); s) {
 			exposure_us_ = exposure_us;
 			gain_ = gain;
+			pipeline_->readWhole(kWholeFramesAfterLightChange);
 		} else {
 			std::fprintf(log_, "dockposed: camera controls: %s\n", s.message().c_str());
 		}
@@ -573,6 +580,8 @@ void Daemon::applyCommand(const can::CommandData &command)
 
 void Daemon::applyStrobeMode(StrobeMode mode)
 {
+	if (pipeline_ && mode != strobe_mode_)
+		pipeline_->readWhole(kWholeFramesAfterLightChange);
 	strobe_mode_ = mode;
 	have_ambient_ = false;
 	last_scheduled_sequence_ = 0;

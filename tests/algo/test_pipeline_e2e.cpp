@@ -196,6 +196,36 @@ TEST(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
 	EXPECT_GE(windowed, found * 8 / 10);
 }
 
+/* After readWhole(n) the next n frames are read whole, then windows again. */
+TEST(EndToEndTracking, ReadWholeAfterALightChange)
+{
+	const auto target = loadTargetModel(dataPath("wedge.json"));
+	const auto camera = loadCameraIntrinsics(dataPath("cam1456.json"));
+	ASSERT_TRUE(target.ok() && camera.ok());
+	FrameRenderer renderer(target.value, camera.value);
+	Pipeline pipeline(target.value, camera.value);
+	Image frame;
+	std::vector<int> windows;
+	for (int i = 0; i < 12; ++i) {
+		if (i == 5)
+			pipeline.readWhole(3);
+		RenderOptions o;
+		o.clutter_seed = 3;
+		renderer.render(poseAt(camera.value, target.value, 900.0 - 2.0 * i,
+				       { 5.0, -4.0, 2.0 }, 0.5, 0.5),
+				o, 40 + i, &frame);
+		const PoseResult &r = pipeline.process(frame.view());
+		ASSERT_TRUE(r.found) << "frame " << i;
+		windows.push_back(r.windows);
+	}
+	for (int i = 1; i < 12; ++i) {
+		if (i >= 5 && i < 8)
+			EXPECT_EQ(windows[i], 0) << "frame " << i;
+		else
+			EXPECT_GT(windows[i], 0) << "frame " << i;
+	}
+}
+
 TEST(EndToEndFailures, EmptyAndWrongSizedFramesGiveNoPose)
 {
 	const auto target = loadTargetModel(dataPath("wedge.json"));
