@@ -184,8 +184,19 @@ int main(int argc, char **argv)
 			5);
 	};
 
+	/*
+	 * Face-complete frames by the LEDs drawn: [n] = { frames, correct }. Four
+	 * is one face alone (no other LED to tell it from chance or from a
+	 * congruent face); more are what the search has beyond one face.
+	 */
+	std::map<int, std::array<int, 2>> by_drawn;
 	auto onFrame = [&](const FrameOutcome &f, const Image &) {
 		const PoseResult &r = *f.result;
+		if (f.face_complete) {
+			auto &c = by_drawn[__builtin_popcount(f.render.visible_mask)];
+			++c[0];
+			c[1] += f.correct ? 1 : 0;
+		}
 		if (!f.target_free) {
 			Bin &b = bins[binOf(f.range_mm)];
 			++b.frames;
@@ -292,6 +303,15 @@ int main(int argc, char **argv)
 		    t.total.face_complete_correct, t.total.face_complete,
 		    percent(t.total.face_complete_correct, t.total.face_complete), seconds,
 		    t.frames / std::max(1e-9, seconds));
+
+	std::string drawn_text;
+	for (const auto &[leds, c] : by_drawn) {
+		char item[80];
+		std::snprintf(item, sizeof(item), "%s%d LEDs %d/%d (%.1f%%)", drawn_text.empty() ? "" : ", ", leds,
+			      c[1], c[0], percent(c[1], c[0]));
+		drawn_text += item;
+	}
+	std::printf("face-complete frames correct, by LEDs drawn: %s\n", drawn_text.c_str());
 
 	if (!json_path.empty()) {
 		std::ofstream js(json_path);
