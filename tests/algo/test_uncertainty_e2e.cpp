@@ -78,8 +78,24 @@ Eigen::Vector3d logRotation(const Eigen::Matrix3d &R)
  * Render `frames` poses of the target on this camera between the ranges,
  * add every correct pose's error to *fig.
  */
+/*
+ * Per spot, for bloomed frames: the centroid's error against the LED's true
+ * image over its reported sigma, per axis, and the error itself (px).
+ */
+struct SpotFigures {
+	int spots = 0, clipped = 0;
+	double ratio_sum = 0.0, ratio_sum2 = 0.0, err_sum = 0.0;
+	double ratioStd() const
+	{
+		const double m = ratio_sum / std::max(1, 2 * spots);
+		return std::sqrt(std::max(0.0, ratio_sum2 / std::max(1, 2 * spots) - m * m));
+	}
+	double meanErr() const { return err_sum / std::max(1, 2 * spots); }
+};
+
 void run(const TargetModel &target, const CameraIntrinsics &cam, double range_min, double range_max,
-	 int frames, std::uint64_t seed, Figures *fig)
+	 int frames, std::uint64_t seed, Figures *fig, double bloom = 0.0, SpotFigures *spots = nullptr,
+	 double gradient = RenderOptions{}.gradient)
 {
 	const CameraModel camera(cam);
 	FrameRenderer renderer(target, cam);
@@ -96,6 +112,8 @@ void run(const TargetModel &target, const CameraIntrinsics &cam, double range_mi
 					  place(rng));
 		RenderOptions o;
 		o.noise_sigma = noises[f % 3];
+		o.bloom = bloom;
+		o.gradient = gradient;
 		RenderTruth t;
 		renderer.render(truth, o, seed * 100003 + static_cast<std::uint64_t>(f), &image,
 				&t);
@@ -126,6 +144,16 @@ void run(const TargetModel &target, const CameraIntrinsics &cam, double range_mi
 				continue;
 			used |= 1ull << best;
 			const Blob &b = blobs[best];
+			if (spots && b.saturated_px > 0 && b.x_min > 0 && b.y_min > 0 && b.x_max + 1 < cam.width &&
+			    b.y_max + 1 < cam.height) {
+				const Eigen::Vector2d err = Eigen::Vector2d(b.u_px, b.v_px) - t.led_px[i];
+				const double ru = err.x() / std::sqrt(b.cov_uu_px2), rv = err.y() / std::sqrt(b.cov_vv_px2);
+				spots->ratio_sum += ru + rv;
+				spots->ratio_sum2 += ru * ru + rv * rv;
+				spots->err_sum += err.x() + err.y();
+				++spots->spots;
+				++spots->clipped;
+			}
 			model[n] = target.points_mm[i];
 			px[n] = { b.u_px, b.v_px };
 			cov[n] << b.cov_uu_px2, b.cov_uv_px2, b.cov_uv_px2, b.cov_vv_px2;
@@ -215,4 +243,48 @@ TEST(UncertaintyE2e, PoseCovarianceIsCalibratedOnRenderedFrames)
 	EXPECT_LT(all.neesMean(), 6.0 * 1.25);
 	EXPECT_GT(all.fractionAbove95(), 0.02);
 	EXPECT_LT(all.fractionAbove95(), 0.09);
+}
+
+/*
+ * Saturated, blooming LEDs (issue 8, item 5): cores clipped at 255 inside a
+ * halo 2 and 3 times the spot's radius. Each clipped spot's centroid must be
+ * unbiased and its sigma honest, and the poses from them calibrated as above.
+ *
+ * Open (docs/vision.md): a background gradient under a large halo pulls the
+ * centroid towards the bright side by more than the noise explains (bloom 3
+ * on the default 10-level gradient: error/sigma std ~1.4-1.6, error ~0.02 px
+ * rms for a sigma of ~0.017 px). That case is bounded at today's figures so
+ * it cannot get worse unnoticed; on a flat background bloom 3 must be honest.
+ */
+TEST(UncertaintyE2e, BloomedClippedSpotsAreUnbiasedAndTheirSigmaHonest)
+{
+	const auto target = loadTargetModel(kData + "/wedge.json");
+	ASSERT_TRUE(target.ok()) << target.error;
+	const auto cam1456 = loadCameraIntrinsics(kData + "/cam1456.json");
+	ASSERT_TRUE(cam1456.ok()) << cam1456.error;
+	struct Case {
+		double bloom, gradient, max_spot_ratio_std, max_pose_ratio_std;
+	};
+	const double gradient = RenderOptions{}.gradient;
+	for (const Case c : { Case{ 2.0, gradient, 1.4, 1.4 }, Case{ 3.0, 0.0, 1.4, 1.4 },
+			      Case{ 3.0, gradient, 1.8, 3.2 } }) {
+		Figures fig;
+		SpotFigures spots;
+		run(target.value, cam1456.value, 350.0, 2100.0, 200, 21 + static_cast<std::uint64_t>(c.bloom), &fig,
+		    c.bloom, &spots, c.gradient);
+		char what[64];
+		std::snprintf(what, sizeof(what), "bloom %.0f, gradient %.0f", c.bloom, c.gradient);
+		report(what, fig);
+		std::printf("%s: %d clipped spots; std of centroid error/sigma %.3f, mean error %.4f px\n", what,
+			    spots.clipped, spots.ratioStd(), spots.meanErr());
+		ASSERT_GE(spots.clipped, 400) << what;
+		EXPECT_GT(spots.ratioStd(), 0.5) << what;
+		EXPECT_LT(spots.ratioStd(), c.max_spot_ratio_std) << what;
+		EXPECT_LT(std::abs(spots.meanErr()), 0.02) << what; /* no bias over the gradient's directions */
+		ASSERT_GE(fig.poses, 150) << what;
+		for (int k = 0; k < 6; ++k) {
+			EXPECT_GT(fig.ratioStd(k), 0.5) << what << " axis " << k;
+			EXPECT_LT(fig.ratioStd(k), c.max_pose_ratio_std) << what << " axis " << k;
+		}
+	}
 }
