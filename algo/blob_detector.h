@@ -42,9 +42,10 @@ struct BlobMoments {
 	std::uint32_t noisy = 0;
 	std::uint64_t sum_x = 0, sum_y = 0;
 	std::uint64_t sum_xx = 0, sum_yy = 0, sum_xy = 0;
-	/* Pixels at or above the clip level, their sums of x and y, their bounding box. */
+	/* Pixels at or above the clip level, their sums of x, y and of their products, their bounding box. */
 	std::uint32_t saturated = 0;
 	std::uint64_t sat_x = 0, sat_y = 0;
+	std::uint64_t sat_xx = 0, sat_yy = 0, sat_xy = 0;
 	std::uint16_t sat_x_min = 0xffff, sat_x_max = 0, sat_y_min = 0xffff, sat_y_max = 0;
 	/*
 	 * The levels T of the segmented pixels: their sum, sums of T x and T y,
@@ -172,6 +173,7 @@ private:
 	const BlobMoments *components() const;
 	void collect(const ImageView &image, BlobStats *stats,
 		     StaticVector<Blob, kMaxCandidates> *blobs) const;
+	void correctBackgroundSlope(const BlobMoments &m, Blob *b) const;
 
 	Thresholder thresholder_;
 	BlobFilterConfig filter_;

@@ -5,6 +5,7 @@
 #include "algo/threshold.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 
@@ -127,6 +128,7 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 	ThresholdStats *st = stats ? stats : &local;
 	*st = ThresholdStats{};
 
+	cols_ = rows_ = 0;
 	if (!image.valid() || image.width > max_width_ || image.height > max_height_) {
 		map_.setUniform(255);
 		st->level_min = st->level_max = 255;
@@ -146,6 +148,10 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 	}
 
 	computeAuto(image, st);
+	width_ = image.width;
+	height_ = image.height;
+	cols_ = st->tiles_x;
+	rows_ = st->tiles_y;
 	return map_;
 }
 
@@ -460,6 +466,60 @@ void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
 	stats->tiles_x = cols;
 	stats->tiles_y = rows;
 	stats->valid = true;
+}
+
+bool Thresholder::backgroundSlope(double u_px, double v_px, double *gx, double *gy,
+				  double *sigma) const
+{
+	if (cols_ < 2 || rows_ < 2)
+		return false;
+	const int tile = tile_px_;
+	const int pcols = cols_ + 2;
+	const int c_at = std::clamp(static_cast<int>(u_px) / tile, 0, cols_ - 1);
+	const int r_at = std::clamp(static_cast<int>(v_px) / tile, 0, rows_ - 1);
+	const int c0 = std::max(c_at - 2, 0), c1 = std::min(c_at + 2, cols_ - 1);
+	const int r0 = std::max(r_at - 2, 0), r1 = std::min(r_at + 2, rows_ - 1);
+	/* Least squares b = a + gx (x - u) + gy (y - v) over the tiles' centres. */
+	double s[3][3] = {}, t[3] = {};
+	double b2sum = 0.0;
+	int n = 0;
+	for (int r = r0; r <= r1; ++r) {
+		const double y = r * tile + 0.5 * (std::min(tile, height_ - r * tile) - 1);
+		for (int c = c0; c <= c1; ++c) {
+			const double x = c * tile + 0.5 * (std::min(tile, width_ - c * tile) - 1);
+			const double b = padded_[static_cast<std::size_t>(r + 1) * pcols +
+						 static_cast<std::size_t>(c + 1)];
+			const double f[3] = { 1.0, x - u_px, y - v_px };
+			for (int i = 0; i < 3; ++i) {
+				for (int j = 0; j < 3; ++j)
+					s[i][j] += f[i] * f[j];
+				t[i] += f[i] * b;
+			}
+			b2sum += b * b;
+			++n;
+		}
+	}
+	/* Solve the 3 x 3 normal equations (symmetric, positive definite for 2 x 2 tiles or more). */
+	const double a00 = s[0][0], a01 = s[0][1], a02 = s[0][2], a11 = s[1][1], a12 = s[1][2],
+		     a22 = s[2][2];
+	const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22,
+		     c02 = a01 * a12 - a02 * a11;
+	const double det = a00 * c00 + a01 * c01 + a02 * c02;
+	if (!(det > 0.0))
+		return false;
+	const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12,
+		     c22 = a00 * a11 - a01 * a01;
+	const double p0 = (c00 * t[0] + c01 * t[1] + c02 * t[2]) / det;
+	const double p1 = (c01 * t[0] + c11 * t[1] + c12 * t[2]) / det;
+	const double p2 = (c02 * t[0] + c12 * t[1] + c22 * t[2]) / det;
+	/* Residual variance of one tile's background, at least its rounding to a level. */
+	const double ssr = b2sum - (p0 * t[0] + p1 * t[1] + p2 * t[2]);
+	const double var_b = std::max(n > 3 ? ssr / (n - 3) : 0.0, 1.0 / 12.0);
+	*gx = p1;
+	*gy = p2;
+	/* The larger of the two slopes' variances: var_b (A^-1)_kk. */
+	*sigma = std::sqrt(var_b * std::max(c11, c22) / det);
+	return true;
 }
 
 } /* namespace dockpose */

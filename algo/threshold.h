@@ -169,6 +169,17 @@ public:
 	const ThresholdMap &compute(const ImageView &image, ThresholdStats *stats = nullptr);
 
 	const ThresholdMap &map() const { return map_; }
+
+	/*
+	 * The background's slope around pixel (u_px, v_px) in the last Auto
+	 * compute(): a plane fitted to the guarded tile backgrounds of the 5 x 5
+	 * tiles around it, its gradient (gx, gy) in levels per pixel, and the
+	 * 1-sigma of each component from the fit's residuals (at least the
+	 * backgrounds' quantisation). False when there is no such background
+	 * (Fixed mode, an invalid frame, fewer than 2 x 2 tiles).
+	 * Allocates: never.
+	 */
+	bool backgroundSlope(double u_px, double v_px, double *gx, double *gy, double *sigma) const;
 	const ThresholdConfig &config() const { return config_; }
 	int maxWidth() const { return max_width_; }
 	int maxHeight() const { return max_height_; }
@@ -187,6 +198,8 @@ private:
 	int max_height_ = 0;
 	int tile_px_ = 64;
 	int step_px_ = 8;
+	/* The last Auto compute(): its frame and tile grid (0: none, backgrounds in padded_). */
+	int width_ = 0, height_ = 0, cols_ = 0, rows_ = 0;
 	UQ8_8 k_sigma_;
 	UQ16_16 min_contrast_;
 

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -410,4 +411,46 @@ TEST(Threshold, TileAndStepConfiguration)
 	/* min_contrast alone; 16 samples per tile make noisier tile medians */
 	EXPECT_NEAR(meanLevel(map), 60 + 12, 1.0);
 	EXPECT_GE(stats.level_min, 60 + 12 - 4);
+}
+
+/* The background's slope around a point: a plane through the tile backgrounds, with an honest sigma. */
+TEST(Threshold, BackgroundSlopeOfAPlane)
+{
+	const int w = 800, h = 600;
+	std::mt19937 rng(8);
+	std::normal_distribution<double> noise(0.0, 2.0);
+	for (const auto &[gx, gy] :
+	     { std::pair{ 0.05, -0.03 }, std::pair{ 0.0, 0.0 }, std::pair{ -0.007, 0.002 } }) {
+		std::vector<std::uint8_t> pixels(static_cast<std::size_t>(w) * h);
+		for (int y = 0; y < h; ++y)
+			for (int x = 0; x < w; ++x)
+				pixels[static_cast<std::size_t>(y) * w + x] =
+					static_cast<std::uint8_t>(std::clamp(
+						std::lround(60.0 + gx * x + gy * y + noise(rng)),
+						0L, 255L));
+		Thresholder t(w, h, ThresholdConfig{});
+		t.compute(ImageView{ pixels.data(), w, h, w });
+		for (const auto &[u, v] : { std::pair{ 400.0, 300.0 }, std::pair{ 10.0, 590.0 },
+					    std::pair{ 790.0, 5.0 } }) {
+			double sx = 0.0, sy = 0.0, sigma = 0.0;
+			ASSERT_TRUE(t.backgroundSlope(u, v, &sx, &sy, &sigma));
+			EXPECT_GT(sigma, 0.0);
+			EXPECT_LT(
+				sigma,
+				0.01); /* 5 x 5 tiles of 64 px: a few thousandths of a level per pixel */
+			EXPECT_NEAR(sx, gx, std::max(4.0 * sigma, 0.002)) << u << ", " << v;
+			EXPECT_NEAR(sy, gy, std::max(4.0 * sigma, 0.002)) << u << ", " << v;
+		}
+	}
+	/* Fixed mode and an invalid frame have no background to fit. */
+	ThresholdConfig fixed;
+	fixed.mode = ThresholdMode::Fixed;
+	Thresholder f(w, h, fixed);
+	std::vector<std::uint8_t> flat(static_cast<std::size_t>(w) * h, 30);
+	f.compute(ImageView{ flat.data(), w, h, w });
+	double sx = 0.0, sy = 0.0, sigma = 0.0;
+	EXPECT_FALSE(f.backgroundSlope(100.0, 100.0, &sx, &sy, &sigma));
+	Thresholder a(w, h, ThresholdConfig{});
+	a.compute(ImageView{});
+	EXPECT_FALSE(a.backgroundSlope(100.0, 100.0, &sx, &sy, &sigma));
 }

@@ -250,11 +250,10 @@ TEST(UncertaintyE2e, PoseCovarianceIsCalibratedOnRenderedFrames)
  * halo 2 and 3 times the spot's radius. Each clipped spot's centroid must be
  * unbiased and its sigma honest, and the poses from them calibrated as above.
  *
- * Open (docs/vision.md): a background gradient under a large halo pulls the
- * centroid towards the bright side by more than the noise explains (bloom 3
- * on the default 10-level gradient: error/sigma std ~1.4-1.6, error ~0.02 px
- * rms for a sigma of ~0.017 px). That case is bounded at today's figures so
- * it cannot get worse unnoticed; on a flat background bloom 3 must be honest.
+ * On a background gradient a large halo's weights tilt: before the
+ * background-slope correction (BlobDetector, docs/vision.md) bloom 3 on the
+ * default 10-level gradient gave error/sigma 1.55 per spot and 2.6-2.8 on
+ * the poses' tx, ty. The cases include a gradient of 30 levels.
  */
 TEST(UncertaintyE2e, BloomedClippedSpotsAreUnbiasedAndTheirSigmaHonest)
 {
@@ -263,11 +262,11 @@ TEST(UncertaintyE2e, BloomedClippedSpotsAreUnbiasedAndTheirSigmaHonest)
 	const auto cam1456 = loadCameraIntrinsics(kData + "/cam1456.json");
 	ASSERT_TRUE(cam1456.ok()) << cam1456.error;
 	struct Case {
-		double bloom, gradient, max_spot_ratio_std, max_pose_ratio_std;
+		double bloom, gradient;
 	};
 	const double gradient = RenderOptions{}.gradient;
-	for (const Case c : { Case{ 2.0, gradient, 1.4, 1.4 }, Case{ 3.0, 0.0, 1.4, 1.4 },
-			      Case{ 3.0, gradient, 1.8, 3.2 } }) {
+	for (const Case c : { Case{ 2.0, gradient }, Case{ 3.0, 0.0 }, Case{ 3.0, gradient },
+			      Case{ 3.0, 30.0 } }) {
 		Figures fig;
 		SpotFigures spots;
 		run(target.value, cam1456.value, 350.0, 2100.0, 200, 21 + static_cast<std::uint64_t>(c.bloom), &fig,
@@ -278,13 +277,13 @@ TEST(UncertaintyE2e, BloomedClippedSpotsAreUnbiasedAndTheirSigmaHonest)
 		std::printf("%s: %d clipped spots; std of centroid error/sigma %.3f, mean error %.4f px\n", what,
 			    spots.clipped, spots.ratioStd(), spots.meanErr());
 		ASSERT_GE(spots.clipped, 400) << what;
-		EXPECT_GT(spots.ratioStd(), 0.5) << what;
-		EXPECT_LT(spots.ratioStd(), c.max_spot_ratio_std) << what;
+		EXPECT_GT(spots.ratioStd(), 0.7) << what;
+		EXPECT_LT(spots.ratioStd(), 1.4) << what;
 		EXPECT_LT(std::abs(spots.meanErr()), 0.02) << what; /* no bias over the gradient's directions */
 		ASSERT_GE(fig.poses, 150) << what;
 		for (int k = 0; k < 6; ++k) {
-			EXPECT_GT(fig.ratioStd(k), 0.5) << what << " axis " << k;
-			EXPECT_LT(fig.ratioStd(k), c.max_pose_ratio_std) << what << " axis " << k;
+			EXPECT_GT(fig.ratioStd(k), 0.7) << what << " axis " << k;
+			EXPECT_LT(fig.ratioStd(k), 1.4) << what << " axis " << k;
 		}
 	}
 }
