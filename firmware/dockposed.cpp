@@ -32,10 +32,16 @@ std::atomic<bool> g_stop{ false };
 /* For fatal signals: the LED goes off before the process dies. */
 dockpose::hal::Strobe *g_strobe = nullptr;
 
-/* Start-up's watchdog: the step under way (a string literal), the limit, the status. */
+/*
+ * Start-up's watchdog: the step under way (a string literal), and the
+ * message's two fixed parts, formatted when the watchdog is armed (the
+ * signal handler may not format).
+ */
 constexpr int kExitStartupHung = 75;
 std::atomic<const char *> g_startup_step{ "start-up" };
 int g_startup_timeout_s = 20;
+char g_startup_head[96] = "";
+char g_startup_tail[48] = "";
 
 void writeAll(const char *text)
 {
@@ -54,27 +60,20 @@ void onStartupTimeout(int)
 {
 	if (g_strobe)
 		g_strobe->forceOff();
-	char seconds[16];
-	int n = 0;
-	for (int v = g_startup_timeout_s; v > 0 && n < 15; v /= 10)
-		seconds[n++] = static_cast<char>('0' + v % 10);
-	for (int i = 0; i < n / 2; ++i) {
-		const char c = seconds[i];
-		seconds[i] = seconds[n - 1 - i];
-		seconds[n - 1 - i] = c;
-	}
-	seconds[n] = '\0';
-	writeAll("dockposed: start-up did not finish within ");
-	writeAll(seconds);
-	writeAll(" s (--startup-timeout), stuck ");
+	writeAll(g_startup_head);
 	writeAll(g_startup_step.load());
-	writeAll("; exiting with status 75\n");
+	writeAll(g_startup_tail);
 	::_exit(kExitStartupHung);
 }
 
 void armStartupWatchdog(int timeout_s)
 {
 	g_startup_timeout_s = timeout_s;
+	std::snprintf(g_startup_head, sizeof(g_startup_head),
+		      "dockposed: start-up did not finish within %d s (--startup-timeout), stuck ",
+		      timeout_s);
+	std::snprintf(g_startup_tail, sizeof(g_startup_tail), "; exiting with status %d\n",
+		      kExitStartupHung);
 	struct sigaction alarm_action {};
 	alarm_action.sa_handler = onStartupTimeout;
 	sigemptyset(&alarm_action.sa_mask);
