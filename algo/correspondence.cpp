@@ -506,27 +506,24 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 
 	/*
 	 * Density: the frame's candidates, or the unmatched ones in a window of
-	 * three times the target's extent around it, whichever is denser.
+	 * three times the target's extent around it, whichever is denser. When
+	 * only windows were read (context_), the unmatched blobs in them over
+	 * their area, or the last whole frame's candidates.
 	 */
+	const bool windows = context_.window_area_px2 > 0.0;
 	const double extent = std::max({ hi.x() - lo.x(), hi.y() - lo.y(), 1.0 });
 	const double x0 = std::max(lo.x() - extent, -0.5), x1 = std::min(hi.x() + extent, intr.width - 0.5);
 	const double y0 = std::max(lo.y() - extent, -0.5), y1 = std::min(hi.y() + extent, intr.height - 0.5);
 	int local = 0;
 	for (std::size_t j = 0; j < px_.size(); ++j)
-		if (usable_[j] && !(matched & (std::uint64_t{ 1 } << j)) && px_[j].x() >= x0 && px_[j].x() <= x1 &&
-		    px_[j].y() >= y0 && px_[j].y() <= y1)
+		if (usable_[j] && !(matched & (std::uint64_t{ 1 } << j)) &&
+		    (windows || (px_[j].x() >= x0 && px_[j].x() <= x1 && px_[j].y() >= y0 &&
+				 px_[j].y() <= y1)))
 			++local;
-	const double window_area = std::max((x1 - x0) * (y1 - y0), 1.0);
-	double rho = std::max(n_cand_ / frame_area, local / window_area);
-	if (context_.window_area_px2 > 0.0) {
-		/* Only the windows were read: the unmatched blobs in them, or the last whole frame. */
-		int unmatched = 0;
-		for (std::size_t j = 0; j < px_.size(); ++j)
-			if (usable_[j] && !(matched & (std::uint64_t{ 1 } << j)))
-				++unmatched;
-		rho = std::max(context_.frame_candidates / frame_area,
-			       unmatched / context_.window_area_px2);
-	}
+	const double local_area = windows ? context_.window_area_px2
+					  : std::max((x1 - x0) * (y1 - y0), 1.0);
+	const double frame_count = windows ? context_.frame_candidates : n_cand_;
+	const double rho = std::max(frame_count / frame_area, local / local_area);
 
 	/*
 	 * The evidence of the best m of the k matched LEDs (m >= 4), as

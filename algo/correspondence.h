@@ -141,7 +141,7 @@ struct SolveContext {
 	 * partial frame would miss what lies outside the windows).
 	 */
 	double window_area_px2 = 0.0;
-	int frame_candidates = 0; /* usable candidates of the last whole-frame pass */
+	int frame_candidates = 0; /* candidates (blobs) of the last whole-frame pass */
 };
 
 class Correspondence

@@ -49,6 +49,12 @@ bool overlapOrTouch(const PixelWindow &a, const PixelWindow &b)
 	return a.x0 <= b.x1 && b.x0 <= a.x1 && a.y0 <= b.y1 && b.y0 <= a.y1;
 }
 
+PixelWindow boundingBox(const PixelWindow &a, const PixelWindow &b)
+{
+	return PixelWindow{ std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1),
+			    std::max(a.y1, b.y1) };
+}
+
 } /* namespace */
 
 void Pipeline::setFound(const CorrespondenceResult &match)
@@ -120,10 +126,7 @@ bool Pipeline::processWindows(const ImageView &frame)
 			for (std::size_t b = a + 1; b < windows_.size(); ++b) {
 				if (!overlapOrTouch(windows_[a], windows_[b]))
 					continue;
-				PixelWindow &w = windows_[a];
-				const PixelWindow &o = windows_[b];
-				w = PixelWindow{ std::min(w.x0, o.x0), std::min(w.y0, o.y0),
-						 std::max(w.x1, o.x1), std::max(w.y1, o.y1) };
+				windows_[a] = boundingBox(windows_[a], windows_[b]);
 				windows_[b] = windows_.back();
 				windows_.pop_back();
 				merged = true;
@@ -144,8 +147,7 @@ bool Pipeline::processWindows(const ImageView &frame)
 	if (!ok && stats.window_cut && windows_.size() > 1) {
 		PixelWindow all = windows_[0];
 		for (const PixelWindow &w : windows_)
-			all = PixelWindow{ std::min(all.x0, w.x0), std::min(all.y0, w.y0),
-					   std::max(all.x1, w.x1), std::max(all.y1, w.y1) };
+			all = boundingBox(all, w);
 		windows_.clear();
 		windows_.push_back(all);
 		ok = detector_.detectWindows(frame, windows_.data(), windows_.size(), &blobs_,

@@ -39,7 +39,7 @@ dockpose::hal::Strobe *g_strobe = nullptr;
  */
 constexpr int kExitStartupHung = 75;
 std::atomic<const char *> g_startup_step{ "start-up" };
-int g_startup_timeout_s = 20;
+constexpr int kDefaultStartupTimeoutS = 20;
 char g_startup_head[96] = "";
 char g_startup_tail[48] = "";
 
@@ -68,7 +68,6 @@ void onStartupTimeout(int)
 
 void armStartupWatchdog(int timeout_s)
 {
-	g_startup_timeout_s = timeout_s;
 	std::snprintf(g_startup_head, sizeof(g_startup_head),
 		      "dockposed: start-up did not finish within %d s (--startup-timeout), stuck ",
 		      timeout_s);
@@ -142,7 +141,7 @@ int main(int argc, char **argv)
 	app.add_option("--for", run_for_s, "run this many seconds, then shut down cleanly (0: until SIGTERM)")
 		->check(CLI::NonNegativeNumber);
 	app.add_option("--can-log", can_log, "write CAN frames to this candump log (boards whose CAN backend is 'file')");
-	int startup_timeout_s = g_startup_timeout_s;
+	int startup_timeout_s = kDefaultStartupTimeoutS;
 	app.add_option("--startup-timeout", startup_timeout_s,
 		       "seconds the backends may take to open and start before dockposed gives up (exit 75)")
 		->check(CLI::Range(1, 600))

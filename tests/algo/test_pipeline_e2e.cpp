@@ -101,11 +101,18 @@ INSTANTIATE_TEST_SUITE_P(
 		return name + (param_info.param.clutter ? "_clutter" : "_clean");
 	});
 
-TEST(EndToEndTracking, ApproachIsTrackedFrameToFrame)
+/* The tracking tests: the paper's wedge on the 1456 px camera. */
+class EndToEndTracking : public ::testing::Test
 {
-	const auto target = loadTargetModel(dataPath("wedge.json"));
-	const auto camera = loadCameraIntrinsics(dataPath("cam1456.json"));
-	ASSERT_TRUE(target.ok() && camera.ok());
+protected:
+	void SetUp() override { ASSERT_TRUE(target.ok() && camera.ok()); }
+
+	const LoadResult<TargetModel> target = loadTargetModel(dataPath("wedge.json"));
+	const LoadResult<CameraIntrinsics> camera = loadCameraIntrinsics(dataPath("cam1456.json"));
+};
+
+TEST_F(EndToEndTracking, ApproachIsTrackedFrameToFrame)
+{
 	FrameRenderer renderer(target.value, camera.value);
 	Pipeline pipeline(target.value, camera.value);
 	Image frame;
@@ -134,11 +141,8 @@ TEST(EndToEndTracking, ApproachIsTrackedFrameToFrame)
  * windows cannot follow, a reflection appearing next to an LED, and a frame
  * without the target.
  */
-TEST(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
+TEST_F(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
 {
-	const auto target = loadTargetModel(dataPath("wedge.json"));
-	const auto camera = loadCameraIntrinsics(dataPath("cam1456.json"));
-	ASSERT_TRUE(target.ok() && camera.ok());
 	FrameRenderer renderer(target.value, camera.value);
 	PipelineConfig whole_config;
 	whole_config.full_frame_every = 1;
@@ -197,11 +201,8 @@ TEST(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
 }
 
 /* After readWhole(n) the next n frames are read whole, then windows again. */
-TEST(EndToEndTracking, ReadWholeAfterALightChange)
+TEST_F(EndToEndTracking, ReadWholeAfterALightChange)
 {
-	const auto target = loadTargetModel(dataPath("wedge.json"));
-	const auto camera = loadCameraIntrinsics(dataPath("cam1456.json"));
-	ASSERT_TRUE(target.ok() && camera.ok());
 	FrameRenderer renderer(target.value, camera.value);
 	Pipeline pipeline(target.value, camera.value);
 	Image frame;
