@@ -88,6 +88,8 @@ Correspondence::Correspondence(const TargetModel &target, const CameraModel &cam
 	: target_(target), camera_(camera), config_(config)
 {
 	diameter_mm_ = target_.diameterMm();
+	cos_view_max_ = std::cos(config_.max_view_angle_deg * kPi / 180.0);
+	tan_view_max_ = std::tan(std::min(config_.max_view_angle_deg, 89.0) * kPi / 180.0);
 	for (const auto &p : target_.points_mm)
 		centroid_mm_ += p;
 	if (!target_.points_mm.empty())
@@ -250,7 +252,7 @@ bool Correspondence::faceVisible(const Pose &pose, std::size_t f) const
 {
 	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm; /* camera centre, target frame */
 	const Eigen::Vector3d view = (camera_t - face_centres_[f]).normalized();
-	return normals_[f].dot(view) > std::cos(config_.max_view_angle_deg * kPi / 180.0);
+	return normals_[f].dot(view) > cos_view_max_;
 }
 
 /*
@@ -953,7 +955,7 @@ bool Correspondence::screenQuad(const Eigen::Vector2d q[4], std::size_t f, const
 	double s = 0.0, t = 0.0;
 	if (!diagonalCross(q[0], q[1], q[2], q[3], &s, &t))
 		return false;
-	const double tan_max = std::tan(std::min(config_.max_view_angle_deg, 89.0) * kPi / 180.0);
+	const double tan_max = tan_view_max_;
 	const double sigma = config_.screen_sigma_px / camera_.intrinsics().fx;
 	auto tolerance = [&](double l) {
 		const double x = l * tan_max;
@@ -1101,19 +1103,46 @@ bool Correspondence::searchTriangles()
 						if (target_.faces.size() > 1 &&
 						    __builtin_popcount(led_faces_[target_.faces[f][missing]]) < 2)
 							continue;
-						for (int dir = -1; dir <= 1; dir += 2)
+						for (int dir = -1; dir <= 1; dir += 2) {
+							/* Face vertices in cyclic order (direction dir) starting after `missing`. */
+							int vertex[3];
+							for (int k = 0; k < 3; ++k)
+								vertex[k] =
+									((missing + dir * (k + 1)) %
+										 4 +
+									 4) %
+									4;
+							/*
+							 * Seen from its front, a face keeps its orientation
+							 * in the image only one way round (tryAssignment's
+							 * sign rule: det[q_i q_j q_k] / A < 0): the image
+							 * triangle is counter-clockwise, so the model's
+							 * must be clockwise about the front normal. The
+							 * other direction's poses all see the face from
+							 * behind; they are never solved.
+							 */
+							const auto &plane = face_plane_[f];
+							if (!(cross2(plane[vertex[1]] -
+									     plane[vertex[0]],
+								     plane[vertex[2]] -
+									     plane[vertex[0]]) <
+							      0.0))
+								continue;
 							for (int rot = 0; rot < 3; ++rot) {
-								/* Face vertices in cyclic order (direction dir) starting after `missing`. */
 								Eigen::Vector3d model[3];
 								Eigen::Vector2d q[3];
 								for (int k = 0; k < 3; ++k) {
-									const int vertex = ((missing + dir * (k + 1)) % 4 + 4) % 4;
-									model[k] = target_.points_mm[target_.faces[f][vertex]];
+									model[k] =
+										target_.points_mm
+											[target_.faces
+												 [f]
+												 [vertex[k]]];
 									q[k] = t[(k + rot) % 3];
 								}
 								if (tryTriangle(model, q, f))
 									return true;
 							}
+						}
 					}
 			}
 	}

@@ -99,7 +99,7 @@ struct CorrespondenceConfig {
 	double screen_sigma_px = 1.0;
 	/* Screen at most this many (subset, face, assignment) hypotheses per frame, of them this many from triangles. */
 	int max_hypotheses = 20000;
-	int max_triangle_hypotheses = 8000;
+	int max_triangle_hypotheses = 4000;
 	/* ... and verify (refine over all predicted LEDs) at most this many: the search's time bound. */
 	int max_verifications = 400;
 	/* Faces seen more obliquely than this (or from behind) are predicted invisible. */
@@ -231,13 +231,19 @@ private:
 	CameraModel camera_;
 	CorrespondenceConfig config_;
 	double diameter_mm_ = 0.0;
+	/* cos and tan of config_.max_view_angle_deg (tan of at most 89 degrees). */
+	double cos_view_max_ = 0.0;
+	double tan_view_max_ = 0.0;
 	Eigen::Vector3d centroid_mm_ = Eigen::Vector3d::Zero();
 	/* Front normals of the faces (TargetModel::frontNormals). */
 	StaticVector<Eigen::Vector3d, kMaxFaces> normals_;
 	StaticVector<Eigen::Vector3d, kMaxFaces> face_centres_;
 	StaticVector<Symmetry, 2 * 4 * kMaxFaces> symmetries_;
 
-	/* Face vertices in 2-D coordinates of the face's own plane (for signed areas). */
+	/*
+	 * Face vertices in 2-D coordinates of the face's own plane (for signed
+	 * areas), in a right-handed frame about the front normal.
+	 */
 	StaticVector<std::array<Eigen::Vector2d, 4>, kMaxFaces> face_plane_;
 	/* For each LED, the faces it belongs to (bit mask). */
 	std::array<std::uint32_t, kMaxLeds> led_faces_{};

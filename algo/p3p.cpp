@@ -1,10 +1,10 @@
 /* SPDX-License-Identifier: MIT */
 #include "algo/p3p.h"
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 
-#include <Eigen/LU>
+#include <Eigen/LU> /* MatrixBase::inverse, determinant */
 
 namespace dockpose {
 
@@ -177,7 +177,11 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 				J(e, pi[e]) = 2.0 * si - 2.0 * sj * cosines[e];
 				J(e, pj[e]) = 2.0 * sj - 2.0 * si * cosines[e];
 			}
-			const Eigen::Vector3d step = J.partialPivLu().solve(f);
+			/* 3x3: cofactors (Eigen's closed form), no pivoting search. */
+			const double det = J.determinant();
+			if (!(std::abs(det) > 1e-300))
+				break;
+			const Eigen::Vector3d step = J.inverse() * f;
 			if (!step.allFinite())
 				break;
 			for (int i = 0; i < 3; ++i)

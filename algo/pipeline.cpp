@@ -166,6 +166,7 @@ bool Pipeline::processWindows(const ImageView &frame)
 	result_.blob_stats = stats;
 	result_.blobs = static_cast<int>(blobs_.size());
 	result_.hypotheses = match.hypotheses;
+	result_.verified = match.verified;
 	result_.windows = static_cast<int>(windows_.size());
 	setFound(match);
 	return true;
@@ -211,6 +212,7 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 	const Pose *prediction = (config_.tracking && have_track_) ? &track_pose_ : nullptr;
 	correspondence_.solve(blobs_, prediction, &match);
 	result_.hypotheses = match.hypotheses;
+	result_.verified = match.verified;
 	if (!match.found) {
 		result_.status = match.ambiguous	   ? PoseStatus::Ambiguous
 				 : match.error_too_large ? PoseStatus::RefineFailed

@@ -57,6 +57,7 @@ struct PoseResult {
 	int windows = 0; /* regions of interest read (0: the whole frame was read) */
 	int blobs = 0;	      /* candidates after the shape filter */
 	int hypotheses = 0;   /* hypotheses scored */
+	int verified = 0; /* of them, verified against every predicted LED */
 	BlobStats blob_stats;
 };
 

@@ -153,6 +153,36 @@ TEST(Correspondence, FindsPoseWithClutterAndHiddenLed)
 	}
 }
 
+/*
+ * The box corner with its corner LED (shared by all three faces) hidden
+ * leaves no face complete: only the triangle search can find the pose, and
+ * it solves P3P only for the vertex order a face seen from its front shows.
+ * Were that orientation rule wrong, nothing would be found here.
+ */
+TEST(Correspondence, TrianglesFindThePoseWhenNoFaceIsComplete)
+{
+	std::mt19937 rng(11);
+	const CameraModel cam(cam1456());
+	const TargetModel m = corner();
+	Correspondence c(m, cam, {});
+	std::uniform_real_distribution<double> ang(-20, 20), range(400, 1500), lat(-0.15, 0.15);
+	int found = 0, trials = 0;
+	for (int t = 0; t < 40; ++t) {
+		const double z = range(rng);
+		const Pose truth =
+			makePose(ang(rng), ang(rng), ang(rng), lat(rng) * z, lat(rng) * z, z);
+		auto blobs = observe(m, cam, truth, 1u << 0, 4, 0.1, rng);
+		CorrespondenceResult r;
+		++trials;
+		if (c.solve(blobs, nullptr, &r)) {
+			++found;
+			expectPose(truth, r.refined.pose, 1.0, std::max(3.0, 0.01 * z));
+			EXPECT_EQ(r.match.led_mask & 1u, 0u);
+		}
+	}
+	EXPECT_GE(found, trials * 9 / 10);
+}
+
 TEST(Correspondence, ReportsTheSymmetricPoseNearestTheModelOrientation)
 {
 	std::mt19937 rng(3);

@@ -68,6 +68,8 @@ struct Spread {
 	double median_us = 0.0;
 	double p99_us = 0.0;
 	double found = 0.0;
+	double hypotheses = 0.0; /* mean per frame */
+	double verified = 0.0;
 };
 Spread g_spread[std::size(kScenarios)];
 
@@ -88,6 +90,7 @@ void coldSearch(benchmark::State &state)
 	std::vector<double> times_us;
 	times_us.reserve(1 << 16);
 	std::size_t i = 0, found = 0;
+	double hypotheses = 0.0, verified = 0.0;
 	for (auto _ : state) {
 		const Image &img = images[i++ % images.size()];
 		pipeline.reset();
@@ -95,6 +98,8 @@ void coldSearch(benchmark::State &state)
 		const PoseResult &r = pipeline.process(img.view());
 		const auto t1 = std::chrono::steady_clock::now();
 		found += r.found;
+		hypotheses += r.hypotheses;
+		verified += r.verified;
 		if (times_us.size() < times_us.capacity())
 			times_us.push_back(
 				std::chrono::duration<double, std::micro>(t1 - t0).count());
@@ -103,17 +108,24 @@ void coldSearch(benchmark::State &state)
 	for (; i < images.size(); ++i) {
 		pipeline.reset();
 		const auto t0 = std::chrono::steady_clock::now();
-		found += pipeline.process(images[i].view()).found;
+		const PoseResult &r = pipeline.process(images[i].view());
 		const auto t1 = std::chrono::steady_clock::now();
+		found += r.found;
+		hypotheses += r.hypotheses;
+		verified += r.verified;
 		times_us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
 	}
 	Spread &s = g_spread[which];
 	s.median_us = percentile(times_us, 0.5);
 	s.p99_us = percentile(times_us, 0.99);
 	s.found = static_cast<double>(found) / static_cast<double>(i);
+	s.hypotheses = hypotheses / static_cast<double>(i);
+	s.verified = verified / static_cast<double>(i);
 	state.counters["median_us"] = s.median_us;
 	state.counters["p99_us"] = s.p99_us;
 	state.counters["found"] = s.found;
+	state.counters["hypotheses"] = s.hypotheses;
+	state.counters["verified"] = s.verified;
 	state.SetLabel(scenarioName(kScenarios[which]));
 }
 
@@ -136,9 +148,10 @@ int main(int argc, char **argv)
 		if (s.median_us <= 0.0)
 			continue;
 		std::printf(
-			"  %-14s median %8.1f us  p99 %8.1f us  p99/median %5.2f  with a pose %5.1f %%\n",
+			"  %-14s median %8.1f us  p99 %8.1f us  p99/median %5.2f  with a pose %5.1f %%"
+			"  hypotheses %7.0f  verified %5.0f\n",
 			scenarioName(kScenarios[k]), s.median_us, s.p99_us, s.p99_us / s.median_us,
-			100.0 * s.found);
+			100.0 * s.found, s.hypotheses, s.verified);
 		worst_median = std::max(worst_median, s.median_us);
 		worst_p99 = std::max(worst_p99, s.p99_us);
 	}
