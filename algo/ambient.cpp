@@ -3,10 +3,11 @@
 
 namespace dockpose {
 
-bool subtractAmbient(const ImageView &lit, const ImageView &unlit, std::uint8_t *out, int out_stride_bytes)
+bool subtractAmbient(const ImageView &lit, const ImageView &unlit, std::uint8_t *out,
+		     int out_stride_bytes)
 {
-	if (!lit.valid() || !unlit.valid() || !out || lit.width != unlit.width || lit.height != unlit.height ||
-	    out_stride_bytes < lit.width)
+	if (!lit.valid() || !unlit.valid() || !out || lit.width != unlit.width ||
+	    lit.height != unlit.height || out_stride_bytes < lit.width)
 		return false;
 	for (int y = 0; y < lit.height; ++y) {
 		const std::uint8_t *a = lit.row(y);

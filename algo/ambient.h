@@ -17,6 +17,7 @@
 namespace dockpose {
 
 /* out = max(lit - unlit, 0) pixel by pixel. False (out untouched) if the sizes differ. */
-bool subtractAmbient(const ImageView &lit, const ImageView &unlit, std::uint8_t *out, int out_stride_bytes);
+bool subtractAmbient(const ImageView &lit, const ImageView &unlit, std::uint8_t *out,
+		     int out_stride_bytes);
 
 } /* namespace dockpose */

@@ -28,7 +28,7 @@ namespace dockpose {
 
 /* Raw integer moments of one connected component. */
 struct BlobMoments {
-	std::uint32_t area = 0;	 /* segmented pixels */
+	std::uint32_t area = 0; /* segmented pixels */
 	std::uint64_t sum_w = 0; /* sum of weights */
 	std::uint64_t sum_wx = 0, sum_wy = 0;
 	std::uint64_t sum_wxx = 0, sum_wyy = 0, sum_wxy = 0;
@@ -59,12 +59,12 @@ struct BlobMoments {
 /* A blob that passed the clean-up and shape filter. */
 struct Blob {
 	double u_px = 0.0, v_px = 0.0; /* intensity-weighted centroid */
-	double area_px = 0.0;	       /* segmented pixels (gaps filled) */
-	double weight = 0.0;	       /* sum of weights */
-	double sigma_major_px = 0.0;   /* weighted std-dev along the major axis */
-	double sigma_minor_px = 0.0;   /* ... and the minor axis */
-	double elongation = 1.0;       /* sigma_major / sigma_minor */
-	double fill = 1.0;	       /* area / (pi * 4 sigma_major sigma_minor), ~1 for a disc */
+	double area_px = 0.0; /* segmented pixels (gaps filled) */
+	double weight = 0.0; /* sum of weights */
+	double sigma_major_px = 0.0; /* weighted std-dev along the major axis */
+	double sigma_minor_px = 0.0; /* ... and the minor axis */
+	double elongation = 1.0; /* sigma_major / sigma_minor */
+	double fill = 1.0; /* area / (pi * 4 sigma_major sigma_minor), ~1 for a disc */
 	std::uint8_t peak = 0;
 	std::uint16_t x_min = 0, x_max = 0, y_min = 0, y_max = 0;
 	/*
@@ -101,11 +101,11 @@ struct PixelWindow {
 };
 
 struct BlobStats {
-	int components = 0;	    /* connected components found */
-	int dropped_small = 0;	    /* specks, single pixels */
+	int components = 0; /* connected components found */
+	int dropped_small = 0; /* specks, single pixels */
 	int dropped_large = 0;
-	int dropped_shape = 0;	    /* elongated or sparse */
-	int dropped_capacity = 0;   /* valid blobs beyond kMaxCandidates (weakest dropped) */
+	int dropped_shape = 0; /* elongated or sparse */
+	int dropped_capacity = 0; /* valid blobs beyond kMaxCandidates (weakest dropped) */
 	bool component_overflow = false; /* more than kMaxComponents: frame too cluttered */
 	bool window_cut = false; /* detectWindows(): a component reaches beyond a window */
 	ThresholdStats threshold;
@@ -127,7 +127,8 @@ public:
 	 * frame cannot be processed (larger than the buffers, invalid view,
 	 * component overflow); stats says why. Allocates: never.
 	 */
-	bool detect(const ImageView &image, StaticVector<Blob, kMaxCandidates> *blobs, BlobStats *stats);
+	bool detect(const ImageView &image, StaticVector<Blob, kMaxCandidates> *blobs,
+		    BlobStats *stats);
 
 	/*
 	 * Tracking with regions of interest: the same as detect(), but reading

@@ -12,15 +12,18 @@ std::string CameraIntrinsics::validate() const
 {
 	std::ostringstream err;
 	if (width <= 0 || height <= 0 || width > 16384 || height > 16384)
-		err << "camera size " << width << "x" << height << " is not a sensor size (1..16384 per side)";
+		err << "camera size " << width << "x" << height
+		    << " is not a sensor size (1..16384 per side)";
 	else if (!(std::isfinite(fx) && fx > 0.0) || !(std::isfinite(fy) && fy > 0.0))
-		err << "camera focal lengths fx=" << fx << ", fy=" << fy << " must be positive pixels";
-	else if (!std::isfinite(cx) || !std::isfinite(cy) || cx < -0.5 * width || cx > 1.5 * width ||
-		 cy < -0.5 * height || cy > 1.5 * height)
-		err << "camera principal point (" << cx << ", " << cy << ") is not near the " << width
-		    << "x" << height << " sensor";
-	else if (!std::isfinite(k1) || !std::isfinite(k2) || !std::isfinite(p1) || !std::isfinite(p2) ||
-		 std::abs(k1) > 10.0 || std::abs(k2) > 100.0 || std::abs(p1) > 1.0 || std::abs(p2) > 1.0)
+		err << "camera focal lengths fx=" << fx << ", fy=" << fy
+		    << " must be positive pixels";
+	else if (!std::isfinite(cx) || !std::isfinite(cy) || cx < -0.5 * width ||
+		 cx > 1.5 * width || cy < -0.5 * height || cy > 1.5 * height)
+		err << "camera principal point (" << cx << ", " << cy << ") is not near the "
+		    << width << "x" << height << " sensor";
+	else if (!std::isfinite(k1) || !std::isfinite(k2) || !std::isfinite(p1) ||
+		 !std::isfinite(p2) || std::abs(k1) > 10.0 || std::abs(k2) > 100.0 ||
+		 std::abs(p1) > 1.0 || std::abs(p2) > 1.0)
 		err << "camera distortion k1=" << k1 << " k2=" << k2 << " p1=" << p1 << " p2=" << p2
 		    << " is out of range";
 	return err.str();
@@ -111,8 +114,7 @@ bool CameraModel::project(const Eigen::Vector3d &p_mm, Eigen::Vector2d *uv,
 	*uv = normalizedToPixel(xy);
 	if (jacobian) {
 		Eigen::Matrix<double, 2, 3> dxy;
-		dxy << inv_z, 0.0, -xy.x() * inv_z,
-			0.0, inv_z, -xy.y() * inv_z;
+		dxy << inv_z, 0.0, -xy.x() * inv_z, 0.0, inv_z, -xy.y() * inv_z;
 		Eigen::Matrix2d f = Eigen::Matrix2d::Zero();
 		f(0, 0) = k_.fx;
 		f(1, 1) = k_.fy;

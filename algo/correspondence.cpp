@@ -1,14 +1,14 @@
 /* SPDX-License-Identifier: MIT */
 #include "algo/correspondence.h"
 
-#include "algo/p3p.h"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
 
 #include <Eigen/Geometry>
+
+#include "algo/p3p.h"
 
 namespace dockpose {
 
@@ -78,14 +78,17 @@ double log10Choose(int n, int k)
 {
 	if (k < 0 || k > n)
 		return -std::numeric_limits<double>::infinity();
-	return (std::lgamma(n + 1.0) - std::lgamma(k + 1.0) - std::lgamma(n - k + 1.0)) / std::log(10.0);
+	return (std::lgamma(n + 1.0) - std::lgamma(k + 1.0) - std::lgamma(n - k + 1.0)) /
+	       std::log(10.0);
 }
 
 } /* namespace */
 
 Correspondence::Correspondence(const TargetModel &target, const CameraModel &camera,
 			       const CorrespondenceConfig &config)
-	: target_(target), camera_(camera), config_(config)
+	: target_(target),
+	  camera_(camera),
+	  config_(config)
 {
 	diameter_mm_ = target_.diameterMm();
 	cos_view_max_ = std::cos(config_.max_view_angle_deg * kPi / 180.0);
@@ -118,7 +121,8 @@ void Correspondence::orientFaces()
 		for (int k = 0; k < 4; ++k)
 			centre += target_.points_mm[face[k]] / 4.0;
 		face_centres_.push_back(centre);
-		const Eigen::Vector3d e0 = (target_.points_mm[face[1]] - target_.points_mm[face[0]]).normalized();
+		const Eigen::Vector3d e0 =
+			(target_.points_mm[face[1]] - target_.points_mm[face[0]]).normalized();
 		const Eigen::Vector3d e1 = normals_[f].cross(e0);
 		std::array<Eigen::Vector2d, 4> plane;
 		for (int k = 0; k < 4; ++k) {
@@ -129,7 +133,8 @@ void Correspondence::orientFaces()
 		std::array<double, 4> frac{};
 		for (int a = 0; a < 4; ++a) {
 			double t = 0.0;
-			diagonalCross(plane[a], plane[(a + 1) % 4], plane[(a + 2) % 4], plane[(a + 3) % 4], &frac[a], &t);
+			diagonalCross(plane[a], plane[(a + 1) % 4], plane[(a + 2) % 4],
+				      plane[(a + 3) % 4], &frac[a], &t);
 		}
 		diagonal_frac_.push_back(frac);
 	}
@@ -158,11 +163,13 @@ void Correspondence::findSymmetries()
 				Eigen::Vector3d src[4], dst[4];
 				for (int k = 0; k < 4; ++k) {
 					src[k] = target_.points_mm[face0[k]];
-					dst[k] = target_.points_mm[face[((rot + dir * k) % 4 + 4) % 4]];
+					dst[k] = target_.points_mm[face[((rot + dir * k) % 4 + 4) %
+									4]];
 				}
 				Pose t;
 				double sse = 0.0;
-				if (!hornFit(src, dst, 4, &t, false, nullptr, &sse) || sse > 4.0 * tol * tol)
+				if (!hornFit(src, dst, 4, &t, false, nullptr, &sse) ||
+				    sse > 4.0 * tol * tol)
 					continue;
 				Symmetry s;
 				bool ok = true;
@@ -198,8 +205,9 @@ void Correspondence::findSymmetries()
 					continue;
 				bool duplicate = false;
 				for (const auto &known : symmetries_)
-					duplicate = duplicate ||
-						    std::equal(known.perm.begin(), known.perm.begin() + nl, s.perm.begin());
+					duplicate = duplicate || std::equal(known.perm.begin(),
+									    known.perm.begin() + nl,
+									    s.perm.begin());
 				if (duplicate)
 					continue;
 				for (std::size_t i = nl; i < kMaxLeds; ++i)
@@ -227,12 +235,19 @@ void Correspondence::findCongruences()
 					double size2 = 0.0;
 					for (int k = 0; k < 4; ++k) {
 						src[k] = target_.points_mm[target_.faces[f][k]];
-						dst[k] = target_.points_mm[target_.faces[g][((rot + dir * k) % 4 + 4) % 4]];
+						dst[k] =
+							target_.points_mm
+								[target_.faces[g][((rot + dir * k) %
+											   4 +
+										   4) %
+										  4]];
 					}
-					size2 = std::max((src[0] - src[2]).squaredNorm(), (src[1] - src[3]).squaredNorm());
+					size2 = std::max((src[0] - src[2]).squaredNorm(),
+							 (src[1] - src[3]).squaredNorm());
 					Pose t;
 					double sse = 0.0;
-					if (!hornFit(src, dst, 4, &t, false, nullptr, &sse) || sse > 4.0 * 0.01 * size2)
+					if (!hornFit(src, dst, 4, &t, false, nullptr, &sse) ||
+					    sse > 4.0 * 0.01 * size2)
 						continue;
 					/* Fronts must map onto fronts. */
 					if (normals_[g].dot(t.R * normals_[f]) < 0.5)
@@ -250,7 +265,8 @@ void Correspondence::findCongruences()
 /* Is face f seen from its front, within the view angle, from this pose? */
 bool Correspondence::faceVisible(const Pose &pose, std::size_t f) const
 {
-	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm; /* camera centre, target frame */
+	const Eigen::Vector3d camera_t =
+		-pose.R.transpose() * pose.t_mm; /* camera centre, target frame */
 	const Eigen::Vector3d view = (camera_t - face_centres_[f]).normalized();
 	return normals_[f].dot(view) > cos_view_max_;
 }
@@ -267,7 +283,8 @@ bool Correspondence::plausible(const Pose &pose) const
 		return true;
 	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
 	const Eigen::Vector3d d = camera_t - centroid_mm_;
-	return target_.approach.axis.dot(d) >= std::cos(target_.approach.max_deg * kPi / 180.0) * d.norm();
+	return target_.approach.axis.dot(d) >=
+	       std::cos(target_.approach.max_deg * kPi / 180.0) * d.norm();
 }
 
 /* LEDs on faces seen from the front, projecting inside the frame. */
@@ -283,7 +300,8 @@ std::uint32_t Correspondence::predictedLeds(const Pose &pose, double margin_px) 
 		if (!(front & (1u << i)))
 			continue;
 		Eigen::Vector2d uv;
-		if (camera_.project(pose.apply(target_.points_mm[i]), &uv) && camera_.inImage(uv, margin_px))
+		if (camera_.project(pose.apply(target_.points_mm[i]), &uv) &&
+		    camera_.inImage(uv, margin_px))
 			inside |= 1u << i;
 	}
 	return inside;
@@ -297,7 +315,8 @@ double Correspondence::sizePx(const Pose &pose) const
 
 double Correspondence::gatePx(const Pose &pose) const
 {
-	return std::clamp(config_.gate_frac * sizePx(pose), config_.gate_px, std::max(config_.gate_px, 30.0));
+	return std::clamp(config_.gate_frac * sizePx(pose), config_.gate_px,
+			  std::max(config_.gate_px, 30.0));
 }
 
 /*
@@ -323,7 +342,8 @@ int Correspondence::matchPredicted(const Pose &pose, double gate_px, Match *matc
 		Eigen::Vector2d uv;
 		if (!(front & (1u << i)))
 			continue;
-		if (!camera_.project(pose.apply(target_.points_mm[i]), &uv) || !camera_.inImage(uv, -gate_px))
+		if (!camera_.project(pose.apply(target_.points_mm[i]), &uv) ||
+		    !camera_.inImage(uv, -gate_px))
 			continue;
 		int best = -1;
 		double best_d2 = gate2;
@@ -351,7 +371,8 @@ int Correspondence::matchPredicted(const Pose &pose, double gate_px, Match *matc
 	match->led_mask = 0;
 	for (std::size_t i = 0; i < target_.points_mm.size(); ++i)
 		if (choice[i] >= 0) {
-			match->pairs.push_back({ static_cast<std::int8_t>(i), static_cast<std::int8_t>(choice[i]) });
+			match->pairs.push_back({ static_cast<std::int8_t>(i),
+						 static_cast<std::int8_t>(choice[i]) });
 			match->led_mask |= 1u << i;
 		}
 	return static_cast<int>(match->pairs.size());
@@ -374,8 +395,10 @@ bool Correspondence::refineMatched(const Pose &initial, Hypothesis *h, bool cova
 	RefineOptions options = config_.refine;
 	options.covariance = covariance;
 	options.led_sigma_mm = target_.led_sigma_mm;
-	const Pose start = initial; /* initial may alias h->refined.pose, which refinePose() resets */
-	return refinePose(camera_, model.data(), pixels.data(), n, start, options, &h->refined, cov.data());
+	const Pose start =
+		initial; /* initial may alias h->refined.pose, which refinePose() resets */
+	return refinePose(camera_, model.data(), pixels.data(), n, start, options, &h->refined,
+			  cov.data());
 }
 
 /*
@@ -383,7 +406,8 @@ bool Correspondence::refineMatched(const Pose &initial, Hypothesis *h, bool cova
  * with the normal gate, refine; then count what the pose predicts. Fails as
  * soon as fewer than min_matches LEDs match.
  */
-bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int min_matches, Hypothesis *h) const
+bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int min_matches,
+				 Hypothesis *h) const
 {
 	if (matchPredicted(initial, first_gate_px, &h->match) < min_matches)
 		return false;
@@ -394,8 +418,9 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 		Match again;
 		if (matchPredicted(pose, gatePx(pose), &again) < min_matches)
 			return false;
-		const bool changed = again.led_mask != h->match.led_mask ||
-				     !std::equal(again.pairs.begin(), again.pairs.end(), h->match.pairs.begin());
+		const bool changed =
+			again.led_mask != h->match.led_mask ||
+			!std::equal(again.pairs.begin(), again.pairs.end(), h->match.pairs.begin());
 		if (!changed)
 			break;
 		h->match = again;
@@ -415,7 +440,8 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 		double worst_d2 = -1.0;
 		for (std::size_t k = 0; k < h->match.pairs.size(); ++k) {
 			Eigen::Vector2d uv;
-			if (!camera_.project(pose.apply(target_.points_mm[h->match.pairs[k][0]]), &uv))
+			if (!camera_.project(pose.apply(target_.points_mm[h->match.pairs[k][0]]),
+					     &uv))
 				return false;
 			const double d2 = (uv - px_[h->match.pairs[k][1]]).squaredNorm();
 			if (d2 > worst_d2) {
@@ -432,7 +458,8 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 			break;
 		/* Re-match from the cleaner pose: the LED may find its own blob now. */
 		Match again;
-		if (matchPredicted(trial.refined.pose, gatePx(trial.refined.pose), &again) >= min_matches) {
+		if (matchPredicted(trial.refined.pose, gatePx(trial.refined.pose), &again) >=
+		    min_matches) {
 			trial.match = again;
 			if (!refineMatched(trial.refined.pose, &trial, false))
 				break;
@@ -514,8 +541,10 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 	 */
 	const bool windows = context_.window_area_px2 > 0.0;
 	const double extent = std::max({ hi.x() - lo.x(), hi.y() - lo.y(), 1.0 });
-	const double x0 = std::max(lo.x() - extent, -0.5), x1 = std::min(hi.x() + extent, intr.width - 0.5);
-	const double y0 = std::max(lo.y() - extent, -0.5), y1 = std::min(hi.y() + extent, intr.height - 0.5);
+	const double x0 = std::max(lo.x() - extent, -0.5),
+		     x1 = std::min(hi.x() + extent, intr.width - 0.5);
+	const double y0 = std::max(lo.y() - extent, -0.5),
+		     y1 = std::min(hi.y() + extent, intr.height - 0.5);
 	int local = 0;
 	for (std::size_t j = 0; j < px_.size(); ++j)
 		if (usable_[j] && !(matched & (std::uint64_t{ 1 } << j)) &&
@@ -542,7 +571,8 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 	double search = std::numeric_limits<double>::max();
 	for (int m = 4; m <= k; ++m) {
 		const double p = -std::expm1(-rho * kPi * tol2[m - 1]);
-		search = std::min(search, tests + log10Choose(n - 3, m - 3) + (m - 3) * std::log10(std::max(p, 1e-300)));
+		search = std::min(search, tests + log10Choose(n - 3, m - 3) +
+						  (m - 3) * std::log10(std::max(p, 1e-300)));
 	}
 	if (!h.tracked)
 		return search;
@@ -559,7 +589,8 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 int Correspondence::minLeds(bool tracking) const
 {
 	const int total = static_cast<int>(target_.points_mm.size());
-	return std::max(4, std::min(tracking ? config_.min_leds_track : config_.min_leds_search, total));
+	return std::max(4, std::min(tracking ? config_.min_leds_track : config_.min_leds_search,
+				    total));
 }
 
 /* The 99.9 % point of chi2 for the fit's 2k - 6 degrees of freedom (Wilson-Hilferty). */
@@ -588,9 +619,9 @@ bool Correspondence::errorExplained(const Hypothesis &h, double slack) const
 
 bool Correspondence::acceptable(const Hypothesis &h) const
 {
-	return static_cast<int>(h.match.pairs.size()) >= minLeds(h.tracked) && h.missing <= config_.max_missing &&
-	       errorExplained(h, 1.0) && h.refined.converged && plausible(h.refined.pose) &&
-	       h.log10_nfa <= config_.max_log10_nfa;
+	return static_cast<int>(h.match.pairs.size()) >= minLeds(h.tracked) &&
+	       h.missing <= config_.max_missing && errorExplained(h, 1.0) && h.refined.converged &&
+	       plausible(h.refined.pose) && h.log10_nfa <= config_.max_log10_nfa;
 }
 
 /*
@@ -611,13 +642,18 @@ bool Correspondence::rival(const Hypothesis &other, const Hypothesis &chosen) co
 	 * a lens model off): a 0.6 px residual is 40 sigma for a sharp spot.
 	 */
 	const bool comparable = fitStatistical(chosen, 1.0)
-					? fitStatistical(other, 1.0) || other.refined.chi2 <= 4.0 * chosen.refined.chi2
-					: errorExplained(other, 1.0) || other.refined.rms_px <= 2.0 * chosen.refined.rms_px;
+					? fitStatistical(other, 1.0) ||
+						  other.refined.chi2 <= 4.0 * chosen.refined.chi2
+					: errorExplained(other, 1.0) ||
+						  other.refined.rms_px <=
+							  2.0 * chosen.refined.rms_px;
 	return static_cast<int>(other.match.pairs.size()) >= minLeds(other.tracked) &&
 	       other.missing <= config_.max_missing &&
-	       (other.match.pairs.size() > chosen.match.pairs.size() ? errorExplained(other, 4.0) : comparable) &&
+	       (other.match.pairs.size() > chosen.match.pairs.size() ? errorExplained(other, 4.0)
+								     : comparable) &&
 	       other.refined.converged && plausible(other.refined.pose) &&
-	       other.log10_nfa <= std::max(config_.max_log10_nfa, chosen.log10_nfa + config_.ambiguity_margin);
+	       other.log10_nfa <=
+		       std::max(config_.max_log10_nfa, chosen.log10_nfa + config_.ambiguity_margin);
 }
 
 /* Acceptable first; then more LEDs explained; then fewer false alarms; then lower error. */
@@ -626,7 +662,8 @@ bool Correspondence::better(const Hypothesis &a, const Hypothesis &b) const
 	const bool aa = acceptable(a), ab = acceptable(b);
 	if (aa != ab)
 		return aa;
-	const int na = static_cast<int>(a.match.pairs.size()), nb = static_cast<int>(b.match.pairs.size());
+	const int na = static_cast<int>(a.match.pairs.size()),
+		  nb = static_cast<int>(b.match.pairs.size());
 	if (na != nb)
 		return na > nb;
 	if (a.log10_nfa != b.log10_nfa)
@@ -650,8 +687,9 @@ bool Correspondence::planarMatch(const Match &match) const
 	const Eigen::Vector3d a = target_.points_mm[match.pairs[0][0]];
 	for (std::size_t i = 1; i < match.pairs.size(); ++i)
 		for (std::size_t j = i + 1; j < match.pairs.size(); ++j) {
-			const Eigen::Vector3d n = (target_.points_mm[match.pairs[i][0]] - a)
-							  .cross(target_.points_mm[match.pairs[j][0]] - a);
+			const Eigen::Vector3d n =
+				(target_.points_mm[match.pairs[i][0]] - a)
+					.cross(target_.points_mm[match.pairs[j][0]] - a);
 			if (n.norm() < tol * diameter_mm_)
 				continue;
 			const Eigen::Vector3d u = n.normalized();
@@ -680,12 +718,14 @@ bool Correspondence::planarFlipExplains(const Hypothesis &h) const
 	const Eigen::Vector3d a = target_.points_mm[h.match.pairs[0][0]];
 	Eigen::Vector3d n = Eigen::Vector3d::Zero();
 	for (std::size_t i = 1; i + 1 < h.match.pairs.size() && n.norm() < 1e-9; ++i)
-		n = (target_.points_mm[h.match.pairs[i][0]] - a).cross(target_.points_mm[h.match.pairs[i + 1][0]] - a);
+		n = (target_.points_mm[h.match.pairs[i][0]] - a)
+			    .cross(target_.points_mm[h.match.pairs[i + 1][0]] - a);
 	if (n.norm() < 1e-9)
 		return true;
 	const Eigen::Vector3d v = pose.apply(centre).normalized();
 	const Eigen::Vector3d nc = (pose.R * n).normalized();
-	if (std::abs(nc.dot(v)) > std::cos(0.25 * kPi / 180.0)) /* head-on: the two minima coincide */
+	if (std::abs(nc.dot(v)) >
+	    std::cos(0.25 * kPi / 180.0)) /* head-on: the two minima coincide */
 		return false;
 	const Pose start = mirrorPose(pose, centre, n.normalized());
 	Hypothesis other;
@@ -694,7 +734,8 @@ bool Correspondence::planarFlipExplains(const Hypothesis &h) const
 		return false;
 	if (samePose(other.refined.pose, pose))
 		return false;
-	return other.refined.converged && other.refined.rms_px <= std::max(config_.max_rms_px, 1.5 * h.refined.rms_px);
+	return other.refined.converged &&
+	       other.refined.rms_px <= std::max(config_.max_rms_px, 1.5 * h.refined.rms_px);
 }
 
 /*
@@ -772,8 +813,8 @@ void Correspondence::keep(const Hypothesis &h)
  * Screens, solves, verifies and keeps the hypothesis; returns true when it is
  * good enough to stop the search.
  */
-bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4], std::size_t f,
-				   const int vertex[4])
+bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4],
+				   std::size_t f, const int vertex[4])
 {
 	++hypotheses_;
 	Eigen::Vector2d plane[4];
@@ -792,7 +833,8 @@ bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vect
 	double Z[4];
 	for (int m = 0; m < 4; ++m) {
 		const int i = (m + 1) % 4, j = (m + 2) % 4, l = (m + 3) % 4;
-		const double D = cross2(q[j] - q[i], q[l] - q[i]); /* det[q_i q_j q_l] with unit third row */
+		const double D =
+			cross2(q[j] - q[i], q[l] - q[i]); /* det[q_i q_j q_l] with unit third row */
 		const double A = cross2(plane[j] - plane[i], plane[l] - plane[i]);
 		Z[m] = -D / A;
 		if (!(Z[m] > 0.0) || !std::isfinite(Z[m]))
@@ -831,13 +873,15 @@ bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vect
  * with normal normal_t (target frame): the plane tilted the other way, the
  * second minimum of a planar set seen in perspective.
  */
-Pose Correspondence::mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t, const Eigen::Vector3d &normal_t)
+Pose Correspondence::mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t,
+				const Eigen::Vector3d &normal_t)
 {
 	const Eigen::Vector3d c = pose.apply(centre_t);
 	const Eigen::Vector3d v = c.normalized();
 	const Eigen::Vector3d nc = (pose.R * normal_t).normalized();
 	const Eigen::Vector3d mirrored = 2.0 * nc.dot(v) * v - nc;
-	const Eigen::Matrix3d flip = Eigen::Quaterniond::FromTwoVectors(nc, mirrored).toRotationMatrix();
+	const Eigen::Matrix3d flip =
+		Eigen::Quaterniond::FromTwoVectors(nc, mirrored).toRotationMatrix();
 	Pose out;
 	out.R = flip * pose.R;
 	out.t_mm = c - flip * (c - pose.t_mm);
@@ -854,7 +898,8 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
 	const double gate = gatePx(pose);
 	for (int k = 0; k < 4; ++k) {
 		Eigen::Vector2d p;
-		if (!camera_.project(pose.apply(model[k]), &p) || (p - uv[k]).squaredNorm() > 4.0 * gate * gate)
+		if (!camera_.project(pose.apply(model[k]), &p) ||
+		    (p - uv[k]).squaredNorm() > 4.0 * gate * gate)
 			return false;
 	}
 
@@ -896,7 +941,8 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
  */
 bool Correspondence::earlyExit(const Hypothesis &h) const
 {
-	return acceptable(h) && fitStatistical(h, 1.0) && h.log10_nfa <= config_.early_exit_log10_nfa;
+	return acceptable(h) && fitStatistical(h, 1.0) &&
+	       h.log10_nfa <= config_.early_exit_log10_nfa;
 }
 
 /*
@@ -950,7 +996,8 @@ std::uint64_t Correspondence::triangleNeighbours(int a) const
  * diagonal of image length l tilted by at most the largest view angle theta.
  * Centroid noise adds about sigma / l.
  */
-bool Correspondence::screenQuad(const Eigen::Vector2d q[4], std::size_t f, const int vertex[4]) const
+bool Correspondence::screenQuad(const Eigen::Vector2d q[4], std::size_t f,
+				const int vertex[4]) const
 {
 	double s = 0.0, t = 0.0;
 	if (!diagonalCross(q[0], q[1], q[2], q[3], &s, &t))
@@ -983,20 +1030,26 @@ bool Correspondence::searchQuads()
 			for (int j = i + 1; j < na; ++j)
 				for (int l = j + 1; l < na; ++l) {
 					const int m[3] = { nb[i], nb[j], nb[l] };
-					const std::uint64_t set = (std::uint64_t{ 1 } << a) | (std::uint64_t{ 1 } << m[0]) |
-								  (std::uint64_t{ 1 } << m[1]) | (std::uint64_t{ 1 } << m[2]);
+					const std::uint64_t set = (std::uint64_t{ 1 } << a) |
+								  (std::uint64_t{ 1 } << m[0]) |
+								  (std::uint64_t{ 1 } << m[1]) |
+								  (std::uint64_t{ 1 } << m[2]);
 					bool earlier = false;
 					for (int e = 0; e < 3 && !earlier; ++e) {
-						const std::uint64_t others = set & ~(std::uint64_t{ 1 } << m[e]);
-						earlier = m[e] < a && (neighbour_bits_[m[e]] & others) == others;
+						const std::uint64_t others =
+							set & ~(std::uint64_t{ 1 } << m[e]);
+						earlier = m[e] < a && (neighbour_bits_[m[e]] &
+								       others) == others;
 					}
 					if (earlier)
 						continue;
-					if (hypotheses_ >= config_.max_hypotheses || verified_ >= config_.max_verifications) {
+					if (hypotheses_ >= config_.max_hypotheses ||
+					    verified_ >= config_.max_verifications) {
 						budget_hit_ = true;
 						return false;
 					}
-					const int idx[4] = { cand_[a], cand_[m[0]], cand_[m[1]], cand_[m[2]] };
+					const int idx[4] = { cand_[a], cand_[m[0]], cand_[m[1]],
+							     cand_[m[2]] };
 					int order[4];
 					if (!convexOrder(xy_.data(), idx, order))
 						continue;
@@ -1010,7 +1063,11 @@ bool Correspondence::searchQuads()
 							for (int rot = 0; rot < 4; ++rot) {
 								int vertex[4];
 								for (int k = 0; k < 4; ++k)
-									vertex[k] = ((rot + dir * k) % 4 + 4) % 4;
+									vertex[k] =
+										((rot + dir * k) %
+											 4 +
+										 4) %
+										4;
 								if (!screenQuad(q, f, vertex))
 									continue;
 								if (tryAssignment(q, uv, f, vertex))
@@ -1026,7 +1083,8 @@ bool Correspondence::searchQuads()
  * P3P, each seen from the face's front, must put one more LED on a candidate
  * before it is verified. True: stop the search.
  */
-bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3], std::size_t f)
+bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3],
+				 std::size_t f)
 {
 	++hypotheses_;
 	Pose poses[4];
@@ -1037,7 +1095,8 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
 			continue;
 		const double gate = 2.0 * gatePx(pose);
 		Match rough;
-		if (matchPredicted(pose, gate, &rough) < minLeds(false) || verified_ >= config_.max_verifications)
+		if (matchPredicted(pose, gate, &rough) < minLeds(false) ||
+		    verified_ >= config_.max_verifications)
 			continue;
 		++verified_;
 		Hypothesis h;
@@ -1060,27 +1119,33 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
  */
 bool Correspondence::searchTriangles()
 {
-	const int budget = std::min(config_.max_hypotheses, hypotheses_ + config_.max_triangle_hypotheses);
+	const int budget =
+		std::min(config_.max_hypotheses, hypotheses_ + config_.max_triangle_hypotheses);
 	for (int a0 = 0; a0 < n_cand_; ++a0) {
 		const int na = std::min(n_neighbours_[a0], config_.triangle_neighbours);
 		const auto &nb = neighbour_list_[a0];
 		for (int i = 0; i < na; ++i)
 			for (int j = i + 1; j < na; ++j) {
 				const int m[2] = { nb[i], nb[j] };
-				const std::uint64_t set = (std::uint64_t{ 1 } << a0) | (std::uint64_t{ 1 } << m[0]) |
+				const std::uint64_t set = (std::uint64_t{ 1 } << a0) |
+							  (std::uint64_t{ 1 } << m[0]) |
 							  (std::uint64_t{ 1 } << m[1]);
 				bool earlier = false;
 				for (int e = 0; e < 2 && !earlier; ++e) {
-					const std::uint64_t others = set & ~(std::uint64_t{ 1 } << m[e]);
-					earlier = m[e] < a0 && (triangleNeighbours(m[e]) & others) == others;
+					const std::uint64_t others = set &
+								     ~(std::uint64_t{ 1 } << m[e]);
+					earlier = m[e] < a0 &&
+						  (triangleNeighbours(m[e]) & others) == others;
 				}
 				if (earlier)
 					continue;
-				if (hypotheses_ >= budget || verified_ >= config_.max_verifications) {
+				if (hypotheses_ >= budget ||
+				    verified_ >= config_.max_verifications) {
 					budget_hit_ = true;
 					return false;
 				}
-				Eigen::Vector2d t[3] = { xy_[cand_[a0]], xy_[cand_[m[0]]], xy_[cand_[m[1]]] };
+				Eigen::Vector2d t[3] = { xy_[cand_[a0]], xy_[cand_[m[0]]],
+							 xy_[cand_[m[1]]] };
 				int ti[3] = { cand_[a0], cand_[m[0]], cand_[m[1]] };
 				/* Counter-clockwise, and not collinear. */
 				double area = cross2(t[1] - t[0], t[2] - t[0]);
@@ -1089,7 +1154,8 @@ bool Correspondence::searchTriangles()
 					std::swap(ti[1], ti[2]);
 					area = -area;
 				}
-				const double extent2 = std::max({ (t[1] - t[0]).squaredNorm(), (t[2] - t[1]).squaredNorm(),
+				const double extent2 = std::max({ (t[1] - t[0]).squaredNorm(),
+								  (t[2] - t[1]).squaredNorm(),
 								  (t[0] - t[2]).squaredNorm() });
 				if (area < 0.05 * extent2)
 					continue;
@@ -1101,7 +1167,9 @@ bool Correspondence::searchTriangles()
 						 * vertices need trying (any vertex for a lone face).
 						 */
 						if (target_.faces.size() > 1 &&
-						    __builtin_popcount(led_faces_[target_.faces[f][missing]]) < 2)
+						    __builtin_popcount(
+							    led_faces_[target_.faces[f][missing]]) <
+							    2)
 							continue;
 						for (int dir = -1; dir <= 1; dir += 2) {
 							/* Face vertices in cyclic order (direction dir) starting after `missing`. */
@@ -1206,7 +1274,8 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	result->log10_nfa = chosen.log10_nfa;
 	if (!acceptable(chosen)) {
 		result->error_too_large = !errorExplained(chosen, 1.0) &&
-					  static_cast<int>(chosen.match.pairs.size()) >= minLeds(false);
+					  static_cast<int>(chosen.match.pairs.size()) >=
+						  minLeds(false);
 		return false;
 	}
 	/*
@@ -1224,7 +1293,8 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 		for (const auto &s : symmetries_) {
 			Pose equivalent;
 			equivalent.R = other.refined.pose.R * s.transform.R;
-			equivalent.t_mm = other.refined.pose.R * s.transform.t_mm + other.refined.pose.t_mm;
+			equivalent.t_mm =
+				other.refined.pose.R * s.transform.t_mm + other.refined.pose.t_mm;
 			symmetric = symmetric || samePose(equivalent, chosen.refined.pose);
 		}
 		if (!symmetric) {
@@ -1282,10 +1352,12 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 			cov = floor2 * Eigen::Matrix2d::Identity();
 		/* A spot cut by the frame's edge: its centroid is uncertain by up to its radius. */
 		const CameraIntrinsics &intr = camera_.intrinsics();
-		const bool measured = blob.area_px > 0.0; /* (blobs made by hand may carry no extent) */
-		if (measured && (blob.x_min == 0 || blob.y_min == 0 || blob.x_max + 1 >= intr.width ||
-				 blob.y_max + 1 >= intr.height)) {
-			const double r = 0.5 * std::max(blob.x_max - blob.x_min + 1, blob.y_max - blob.y_min + 1);
+		const bool measured = blob.area_px >
+				      0.0; /* (blobs made by hand may carry no extent) */
+		if (measured && (blob.x_min == 0 || blob.y_min == 0 ||
+				 blob.x_max + 1 >= intr.width || blob.y_max + 1 >= intr.height)) {
+			const double r = 0.5 * std::max(blob.x_max - blob.x_min + 1,
+							blob.y_max - blob.y_min + 1);
 			cov += r * r * Eigen::Matrix2d::Identity();
 		}
 		cov_.push_back(cov);

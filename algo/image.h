@@ -21,7 +21,10 @@ struct ImageView {
 	int height = 0;
 	int stride_bytes = 0; /* bytes from one row to the next, >= width */
 
-	const std::uint8_t *row(int y) const { return data + static_cast<std::ptrdiff_t>(y) * stride_bytes; }
+	const std::uint8_t *row(int y) const
+	{
+		return data + static_cast<std::ptrdiff_t>(y) * stride_bytes;
+	}
 	std::uint8_t at(int x, int y) const { return row(y)[x]; }
 	bool valid() const { return data && width > 0 && height > 0 && stride_bytes >= width; }
 };
@@ -32,7 +35,8 @@ class Image
 public:
 	Image() = default;
 	Image(int width, int height, std::uint8_t fill = 0)
-		: width_(width), height_(height),
+		: width_(width),
+		  height_(height),
 		  pixels_(static_cast<std::size_t>(width) * static_cast<std::size_t>(height), fill)
 	{
 	}
@@ -42,7 +46,10 @@ public:
 	std::uint8_t *data() { return pixels_.data(); }
 	const std::uint8_t *data() const { return pixels_.data(); }
 	std::uint8_t &at(int x, int y) { return pixels_[static_cast<std::size_t>(y) * width_ + x]; }
-	std::uint8_t at(int x, int y) const { return pixels_[static_cast<std::size_t>(y) * width_ + x]; }
+	std::uint8_t at(int x, int y) const
+	{
+		return pixels_[static_cast<std::size_t>(y) * width_ + x];
+	}
 	bool empty() const { return pixels_.empty(); }
 
 	ImageView view() const { return ImageView{ pixels_.data(), width_, height_, width_ }; }

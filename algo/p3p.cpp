@@ -18,7 +18,9 @@ double largestCubicRoot(double a, double b, double c)
 	const double q3 = q * q * q;
 	if (r * r < q3) {
 		const double theta = std::acos(std::clamp(r / std::sqrt(q3), -1.0, 1.0));
-		return -2.0 * std::sqrt(q) * std::cos((theta - 2.0 * 3.14159265358979323846) / 3.0) - a / 3.0;
+		return -2.0 * std::sqrt(q) *
+			       std::cos((theta - 2.0 * 3.14159265358979323846) / 3.0) -
+		       a / 3.0;
 	}
 	const double A = -std::copysign(std::cbrt(std::abs(r) + std::sqrt(r * r - q3)), r);
 	const double B = A != 0.0 ? q / A : 0.0;
@@ -72,7 +74,8 @@ int quarticRoots(const double c[5], double roots[4])
 		double v = y[i] - a / 4.0;
 		for (int it = 0; it < 4; ++it) {
 			const double f = (((c[4] * v + c[3]) * v + c[2]) * v + c[1]) * v + c[0];
-			const double df = ((4.0 * c[4] * v + 3.0 * c[3]) * v + 2.0 * c[2]) * v + c[1];
+			const double df =
+				((4.0 * c[4] * v + 3.0 * c[3]) * v + 2.0 * c[2]) * v + c[1];
 			if (!(std::abs(df) > 1e-300))
 				break;
 			v -= f / df;
@@ -130,7 +133,8 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 	const double scale2 = std::max({ a2, b2, c2 });
 	if (!(b2 > 1e-12 * scale2) || !(a2 > 1e-12 * scale2) || !(c2 > 1e-12 * scale2))
 		return 0;
-	if ((model_mm[1] - model_mm[0]).cross(model_mm[2] - model_mm[0]).squaredNorm() < 1e-8 * scale2 * scale2)
+	if ((model_mm[1] - model_mm[0]).cross(model_mm[2] - model_mm[0]).squaredNorm() <
+	    1e-8 * scale2 * scale2)
 		return 0;
 	const double ca = j[1].dot(j[2]), cb = j[0].dot(j[2]), cg = j[0].dot(j[1]);
 	const double amc = (a2 - c2) / b2, apc = (a2 + c2) / b2;
@@ -141,7 +145,8 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 	coef[3] = 4.0 * (amc * (1.0 - amc) * cb - (1.0 - apc) * ca * cg + 2.0 * c_b * ca * ca * cb);
 	coef[2] = 2.0 * (amc * amc - 1.0 + 2.0 * amc * amc * cb * cb + 2.0 * bmc * ca * ca -
 			 4.0 * apc * ca * cb * cg + 2.0 * bma * cg * cg);
-	coef[1] = 4.0 * (-amc * (1.0 + amc) * cb + 2.0 * a_b * cg * cg * cb - (1.0 - apc) * ca * cg);
+	coef[1] =
+		4.0 * (-amc * (1.0 + amc) * cb + 2.0 * a_b * cg * cg * cb - (1.0 - apc) * ca * cg);
 	coef[0] = (1.0 + amc) * (1.0 + amc) - 4.0 * a_b * cg * cg;
 	if (!(std::abs(coef[4]) > 1e-12 * (std::abs(coef[0]) + std::abs(coef[2]) + 1e-300)))
 		return 0;
@@ -193,21 +198,24 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 		for (int i = 0; i < 3; ++i)
 			camera_mm[i] = s[i] * j[i];
 		Pose pose;
-		if (!triadFit(model_mm, camera_mm, &pose) || !pose.R.allFinite() || !pose.t_mm.allFinite())
+		if (!triadFit(model_mm, camera_mm, &pose) || !pose.R.allFinite() ||
+		    !pose.t_mm.allFinite())
 			continue;
 		/* An ill-conditioned root (rays nearly parallel) may not fit its rays: drop it. */
 		bool fits = true;
 		for (int i = 0; i < 3 && fits; ++i) {
 			const Eigen::Vector3d c = pose.apply(model_mm[i]);
-			fits = c.z() > 0.0 && (c.head<2>() / c.z() - xy[i]).norm() <= 1e-7 * (1.0 + xy[i].norm());
+			fits = c.z() > 0.0 &&
+			       (c.head<2>() / c.z() - xy[i]).norm() <= 1e-7 * (1.0 + xy[i].norm());
 		}
 		if (!fits)
 			continue;
 		/* Two roots can give the same pose: keep one. */
 		bool duplicate = false;
 		for (int k = 0; k < n; ++k)
-			duplicate = duplicate || ((poses[k].t_mm - pose.t_mm).norm() < 1e-6 * pose.t_mm.norm() &&
-						  (poses[k].R - pose.R).norm() < 1e-6);
+			duplicate = duplicate ||
+				    ((poses[k].t_mm - pose.t_mm).norm() < 1e-6 * pose.t_mm.norm() &&
+				     (poses[k].R - pose.R).norm() < 1e-6);
 		if (!duplicate && n < 4)
 			poses[n++] = pose;
 	}

@@ -26,8 +26,11 @@ const char *poseStatusName(PoseStatus status)
 	return "unknown";
 }
 
-Pipeline::Pipeline(const TargetModel &target, const CameraIntrinsics &camera, const PipelineConfig &config)
-	: target_(target), camera_(camera), config_(config),
+Pipeline::Pipeline(const TargetModel &target, const CameraIntrinsics &camera,
+		   const PipelineConfig &config)
+	: target_(target),
+	  camera_(camera),
+	  config_(config),
 	  detector_(camera.width, camera.height, config.threshold, config.blob_filter),
 	  correspondence_(target, camera_, [&config] {
 		  CorrespondenceConfig c = config.correspondence;
@@ -196,7 +199,8 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 	frames_since_full_ = 0;
 	blobs_.clear();
 	if (!detector_.detect(frame, &blobs_, &result_.blob_stats)) {
-		result_.status = result_.blob_stats.component_overflow ? PoseStatus::TooCluttered : PoseStatus::NoFrame;
+		result_.status = result_.blob_stats.component_overflow ? PoseStatus::TooCluttered
+								       : PoseStatus::NoFrame;
 		have_track_ = false;
 		return result_;
 	}
@@ -214,7 +218,7 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 	result_.hypotheses = match.hypotheses;
 	result_.verified = match.verified;
 	if (!match.found) {
-		result_.status = match.ambiguous	   ? PoseStatus::Ambiguous
+		result_.status = match.ambiguous	 ? PoseStatus::Ambiguous
 				 : match.error_too_large ? PoseStatus::RefineFailed
 							 : PoseStatus::NoMatch;
 		have_track_ = false;

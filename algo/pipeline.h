@@ -23,12 +23,12 @@ namespace dockpose {
 
 enum class PoseStatus : std::uint8_t {
 	Found = 0,
-	NoFrame,	  /* invalid view or wrong size */
-	TooCluttered,	  /* component overflow */
-	TooFewBlobs,	  /* fewer than 4 candidates */
-	NoMatch,	  /* no hypothesis passed verification */
-	Ambiguous,	  /* two different poses explain the image equally well */
-	RefineFailed,	  /* refinement diverged or left a large error */
+	NoFrame, /* invalid view or wrong size */
+	TooCluttered, /* component overflow */
+	TooFewBlobs, /* fewer than 4 candidates */
+	NoMatch, /* no hypothesis passed verification */
+	Ambiguous, /* two different poses explain the image equally well */
+	RefineFailed, /* refinement diverged or left a large error */
 };
 
 const char *poseStatusName(PoseStatus status);
@@ -39,7 +39,7 @@ struct PoseResult {
 	Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
 	Eigen::Vector3d t_mm = Eigen::Vector3d::Zero();
 	Eigen::Quaterniond q = Eigen::Quaterniond::Identity(); /* w >= 0 */
-	Eigen::Vector3d rpy_deg = Eigen::Vector3d::Zero();     /* roll, pan, tilt */
+	Eigen::Vector3d rpy_deg = Eigen::Vector3d::Zero(); /* roll, pan, tilt */
 	double rms_px = 0.0;
 	/*
 	 * log10 of the number of false alarms of the accepted match: the expected
@@ -55,8 +55,8 @@ struct PoseResult {
 	Eigen::Vector3d sigma_rpy_deg = Eigen::Vector3d::Zero();
 	bool tracked = false; /* found by the tracking path (prediction from the last pose) */
 	int windows = 0; /* regions of interest read (0: the whole frame was read) */
-	int blobs = 0;	      /* candidates after the shape filter */
-	int hypotheses = 0;   /* hypotheses scored */
+	int blobs = 0; /* candidates after the shape filter */
+	int hypotheses = 0; /* hypotheses scored */
 	int verified = 0; /* of them, verified against every predicted LED */
 	BlobStats blob_stats;
 };
@@ -90,7 +90,8 @@ class Pipeline
 {
 public:
 	/* Allocates: here, every buffer the frame path needs. */
-	Pipeline(const TargetModel &target, const CameraIntrinsics &camera, const PipelineConfig &config = {});
+	Pipeline(const TargetModel &target, const CameraIntrinsics &camera,
+		 const PipelineConfig &config = {});
 
 	/* One frame -> one pose. Allocates: never. */
 	const PoseResult &process(const ImageView &frame);

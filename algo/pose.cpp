@@ -49,9 +49,7 @@ constexpr int kOmit[4][3] = { { 1, 2, 3 }, { 0, 2, 3 }, { 0, 1, 3 }, { 0, 1, 2 }
 Eigen::Matrix3d skew(const Eigen::Vector3d &v)
 {
 	Eigen::Matrix3d s;
-	s << 0.0, -v.z(), v.y(),
-		v.z(), 0.0, -v.x(),
-		-v.y(), v.x(), 0.0;
+	s << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
 	return s;
 }
 
@@ -78,10 +76,9 @@ bool hornRotation(const Eigen::Matrix3d &S, Eigen::Matrix3d *R, double *gap)
 	const double szx = S(2, 0), szy = S(2, 1), szz = S(2, 2);
 
 	Eigen::Matrix4d N;
-	N << sxx + syy + szz, syz - szy, szx - sxz, sxy - syx,
-		syz - szy, sxx - syy - szz, sxy + syx, szx + sxz,
-		szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy,
-		sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz;
+	N << sxx + syy + szz, syz - szy, szx - sxz, sxy - syx, syz - szy, sxx - syy - szz,
+		sxy + syx, szx + sxz, szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy, sxy - syx,
+		szx + sxz, syz + szy, -sxx - syy + szz;
 
 	const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> es(N);
 	if (es.info() != Eigen::Success)
@@ -198,7 +195,8 @@ bool solveFourCoplanar(const Eigen::Vector3d model_mm[4], const Eigen::Vector2d 
 		const Eigen::Vector2d u = xy[kOmit[m][1]] - qi;
 		const Eigen::Vector2d v = xy[kOmit[m][2]] - qi;
 		const double D = u.x() * v.y() - u.y() * v.x();
-		if (!(std::abs(A) > kMinModelTriangle * model_d2) || !(std::abs(D) > kMinImageTriangle * image_d2))
+		if (!(std::abs(A) > kMinModelTriangle * model_d2) ||
+		    !(std::abs(D) > kMinImageTriangle * image_d2))
 			return false;
 		z[m] = D / A;
 		positive += z[m] > 0.0;
@@ -403,8 +401,9 @@ bool calibrationCoupling(const CameraModel &camera, const Eigen::Vector3d *model
 		const Eigen::Vector2d d = camera.distort({ x, y });
 		const double r2 = x * x + y * y;
 		Eigen::Matrix<double, 2, 8> Jt;
-		Jt << d.x(), 0.0, 1.0, 0.0, k.fx * x * r2, k.fx * x * r2 * r2, k.fx * 2.0 * x * y, k.fx * (r2 + 2.0 * x * x),
-			0.0, d.y(), 0.0, 1.0, k.fy * y * r2, k.fy * y * r2 * r2, k.fy * (r2 + 2.0 * y * y), k.fy * 2.0 * x * y;
+		Jt << d.x(), 0.0, 1.0, 0.0, k.fx * x * r2, k.fx * x * r2 * r2, k.fx * 2.0 * x * y,
+			k.fx * (r2 + 2.0 * x * x), 0.0, d.y(), 0.0, 1.0, k.fy * y * r2,
+			k.fy * y * r2 * r2, k.fy * (r2 + 2.0 * y * y), k.fy * 2.0 * x * y;
 		Eigen::Matrix<double, 2, 6> J;
 		J.leftCols<3>() = jp;
 		J.rightCols<3>() = -jp * skew(rm);
@@ -426,13 +425,15 @@ Pose applyStep(const Pose &pose, const Vector6d &delta)
 
 } /* namespace */
 
-bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, const Eigen::Vector2d *pixels,
-		int n, const Pose &initial, const RefineOptions &options, RefineResult *result,
+bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm,
+		const Eigen::Vector2d *pixels, int n, const Pose &initial,
+		const RefineOptions &options, RefineResult *result,
 		const Eigen::Matrix2d *pixel_cov)
 {
 	*result = RefineResult{};
 	result->pose = initial;
-	if (n < 3 || n > static_cast<int>(kMaxLeds) || !initial.R.allFinite() || !initial.t_mm.allFinite())
+	if (n < 3 || n > static_cast<int>(kMaxLeds) || !initial.R.allFinite() ||
+	    !initial.t_mm.allFinite())
 		return false;
 
 	Weights weights;
@@ -499,7 +500,8 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 			    evaluate(camera, model_mm, pixels, n, candidate, true, weights,
 				     &next)) {
 				const double decrease = ev.cost - next.cost;
-				const bool small_step = delta.head<3>().norm() <= 1e-10 * (1.0 + pose.t_mm.norm()) &&
+				const bool small_step = delta.head<3>().norm() <=
+								1e-10 * (1.0 + pose.t_mm.norm()) &&
 							delta.tail<3>().norm() <= 1e-12;
 				pose = candidate;
 				ev = next;
@@ -572,7 +574,8 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, cons
 	return true;
 }
 
-Eigen::Vector3d rollPanTiltSigmaDeg(const Eigen::Matrix3d &R, const Eigen::Matrix<double, 6, 6> &covariance)
+Eigen::Vector3d rollPanTiltSigmaDeg(const Eigen::Matrix3d &R,
+				    const Eigen::Matrix<double, 6, 6> &covariance)
 {
 	/*
 	 * With R = Rx(a) Ry(b) Rz(c), dR R^T = [w]x where
@@ -591,9 +594,7 @@ Eigen::Vector3d rollPanTiltSigmaDeg(const Eigen::Matrix3d &R, const Eigen::Matri
 		return { inf, std::sqrt(std::max(0.0, e_pan.dot(Cw * e_pan))) * kDegPerRad, inf };
 	}
 	Eigen::Matrix3d M;
-	M << 1.0, 0.0, sb,
-		0.0, ca, -sa * cb,
-		0.0, sa, ca * cb;
+	M << 1.0, 0.0, sb, 0.0, ca, -sa * cb, 0.0, sa, ca * cb;
 	const Eigen::Matrix3d Minv = M.inverse();
 	const Eigen::Matrix3d C = Minv * Cw * Minv.transpose();
 	return Eigen::Vector3d(std::sqrt(std::max(0.0, C(0, 0))), std::sqrt(std::max(0.0, C(1, 1))),

@@ -89,8 +89,8 @@ struct RefineOptions {
 
 struct RefineResult {
 	Pose pose;
-	double rms_px = 0.0;	/* rms reprojection error over all points */
-	double max_px = 0.0;	/* largest reprojection error */
+	double rms_px = 0.0; /* rms reprojection error over all points */
+	double max_px = 0.0; /* largest reprojection error */
 	int iterations = 0;
 	bool converged = false;
 	/*
@@ -122,14 +122,16 @@ struct RefineResult {
  * pixel figures either way. Returns false when the problem is degenerate or
  * a point falls behind the camera. Allocates: never (n <= kMaxLeds).
  */
-bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm, const Eigen::Vector2d *pixels,
-		int n, const Pose &initial, const RefineOptions &options, RefineResult *result,
+bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm,
+		const Eigen::Vector2d *pixels, int n, const Pose &initial,
+		const RefineOptions &options, RefineResult *result,
 		const Eigen::Matrix2d *pixel_cov = nullptr);
 
 /*
  * Standard deviations of (roll, pan, tilt) in degrees from the 6x6 covariance
  * of refinePose() at rotation R (first-order propagation).
  */
-Eigen::Vector3d rollPanTiltSigmaDeg(const Eigen::Matrix3d &R, const Eigen::Matrix<double, 6, 6> &covariance);
+Eigen::Vector3d rollPanTiltSigmaDeg(const Eigen::Matrix3d &R,
+				    const Eigen::Matrix<double, 6, 6> &covariance);
 
 } /* namespace dockpose */

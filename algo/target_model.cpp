@@ -78,14 +78,16 @@ void TargetModel::frontNormals(StaticVector<Eigen::Vector3d, kMaxFaces> *normals
 		 * one, else -z (the camera at the nominal docking pose, method.md).
 		 */
 		double outward = 0.0, towards_camera = 0.0;
-		const Eigen::Vector3d axis = approach.set ? approach.axis : Eigen::Vector3d(-Eigen::Vector3d::UnitZ());
+		const Eigen::Vector3d axis =
+			approach.set ? approach.axis : Eigen::Vector3d(-Eigen::Vector3d::UnitZ());
 		for (std::size_t f = 0; f < nf; ++f)
 			if (group[f] == groups) {
 				outward += (*normals)[f].dot(centres[f] - centroid);
 				towards_camera += (*normals)[f].dot(axis);
 			}
 		const double scale = std::max(diameterMm(), 1e-9);
-		const bool flip = std::abs(outward) > 1e-6 * scale ? outward < 0.0 : towards_camera < 0.0;
+		const bool flip = std::abs(outward) > 1e-6 * scale ? outward < 0.0
+								   : towards_camera < 0.0;
 		if (flip)
 			for (std::size_t f = 0; f < nf; ++f)
 				if (group[f] == groups)
@@ -103,7 +105,8 @@ std::string TargetModel::validate() const
 		return err.str();
 	}
 	if (faces.empty()) {
-		err << "target '" << name << "' has no faces; at least one quadrilateral face is needed";
+		err << "target '" << name
+		    << "' has no faces; at least one quadrilateral face is needed";
 		return err.str();
 	}
 	for (const auto &p : points_mm)
@@ -114,7 +117,8 @@ std::string TargetModel::validate() const
 	for (std::size_t i = 0; i < points_mm.size(); ++i)
 		for (std::size_t j = i + 1; j < points_mm.size(); ++j)
 			if ((points_mm[i] - points_mm[j]).norm() < 1e-3 * diameter) {
-				err << "target '" << name << "': LEDs " << i << " and " << j << " coincide";
+				err << "target '" << name << "': LEDs " << i << " and " << j
+				    << " coincide";
 				return err.str();
 			}
 
@@ -122,14 +126,15 @@ std::string TargetModel::validate() const
 		const auto &face = faces[f];
 		for (int k = 0; k < 4; ++k) {
 			if (face[k] < 0 || face[k] >= static_cast<int>(points_mm.size())) {
-				err << "target '" << name << "': face " << f << " names LED " << face[k]
-				    << ", but the model has LEDs 0.." << points_mm.size() - 1;
+				err << "target '" << name << "': face " << f << " names LED "
+				    << face[k] << ", but the model has LEDs 0.."
+				    << points_mm.size() - 1;
 				return err.str();
 			}
 			for (int m = 0; m < k; ++m)
 				if (face[m] == face[k]) {
-					err << "target '" << name << "': face " << f << " lists LED "
-					    << face[k] << " twice";
+					err << "target '" << name << "': face " << f
+					    << " lists LED " << face[k] << " twice";
 					return err.str();
 				}
 		}
@@ -141,15 +146,17 @@ std::string TargetModel::validate() const
 		const double n_norm = n.norm();
 		const double scale = std::max((p[2] - p[0]).norm(), (p[3] - p[1]).norm());
 		if (n_norm < 1e-6 * scale * scale) {
-			err << "target '" << name << "': face " << f << " is degenerate (its diagonals are parallel)";
+			err << "target '" << name << "': face " << f
+			    << " is degenerate (its diagonals are parallel)";
 			return err.str();
 		}
 		const Eigen::Vector3d unit = n / n_norm;
 		const Eigen::Vector3d centre = (p[0] + p[1] + p[2] + p[3]) / 4.0;
 		for (int k = 0; k < 4; ++k)
 			if (std::abs(unit.dot(p[k] - centre)) > 0.02 * scale) {
-				err << "target '" << name << "': face " << f << " is not planar (LED "
-				    << face[k] << " is " << std::abs(unit.dot(p[k] - centre))
+				err << "target '" << name << "': face " << f
+				    << " is not planar (LED " << face[k] << " is "
+				    << std::abs(unit.dot(p[k] - centre))
 				    << " mm off the face's plane)";
 				return err.str();
 			}

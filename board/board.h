@@ -24,7 +24,7 @@ namespace dockpose::board {
 /* Everything hardware-facing the daemon runs on; destroyed in reverse order. */
 struct Backends {
 	std::unique_ptr<hal::Strobe> strobe;
-	std::unique_ptr<hal::StrobeController> strobe_control;	/* drives `strobe` */
+	std::unique_ptr<hal::StrobeController> strobe_control; /* drives `strobe` */
 	std::unique_ptr<hal::Camera> camera;
 	std::unique_ptr<hal::CanBus> can;
 };

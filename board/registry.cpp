@@ -1,8 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /* The boards built into this binary (DOCKPOSE_BOARDS in board/CMakeLists.txt). */
-#include "board/board.h"
-
 #include <array>
+
+#include "board/board.h"
 
 namespace dockpose::board {
 

@@ -19,11 +19,18 @@
 
 namespace dockpose::firmware {
 
-enum class StrobeMode : std::uint8_t { Off, Constant, Alternate };
+enum class StrobeMode : std::uint8_t {
+	Off,
+	Constant,
+	Alternate
+};
 const char *strobeModeName(StrobeMode mode);
 
 /* Which frames the pose comes from: full search and tracking, or a cold search every frame. */
-enum class TrackMode : std::uint8_t { Track, SearchOnly };
+enum class TrackMode : std::uint8_t {
+	Track,
+	SearchOnly
+};
 
 struct SyntheticCameraConfig {
 	/* The docking approach: the target's pose in the camera frame moves linearly from `from`
@@ -41,30 +48,30 @@ struct SyntheticCameraConfig {
 };
 
 struct ReplayCameraConfig {
-	std::string folder;	/* frame_*.pgm in name order (absolute after loading) */
+	std::string folder; /* frame_*.pgm in name order (absolute after loading) */
 	bool loop = false;
 };
 
 struct CameraSection {
-	std::string backend;	/* "libcamera", "synthetic", "replay": must be one the board wires */
-	std::string id;		/* libcamera camera id; empty: by index */
+	std::string backend; /* "libcamera", "synthetic", "replay": must be one the board wires */
+	std::string id; /* libcamera camera id; empty: by index */
 	int index = 0;
-	int width = 0;		/* 0: the sensor's default (libcamera); must match intrinsics */
+	int width = 0; /* 0: the sensor's default (libcamera); must match intrinsics */
 	int height = 0;
 	double frame_rate_hz = 60.0;
 	int exposure_us = 2000;
 	double analogue_gain = 1.0;
 	int buffer_count = 4;
-	int stall_timeout_ms = 500;	/* no frame for this long: fault, LED off */
-	std::string intrinsics;	/* camera JSON (method.md section 3) */
+	int stall_timeout_ms = 500; /* no frame for this long: fault, LED off */
+	std::string intrinsics; /* camera JSON (method.md section 3) */
 	SyntheticCameraConfig synthetic;
 	ReplayCameraConfig replay;
 };
 
 struct StrobeSection {
-	std::string backend;	/* "gpiod", "recording" */
-	std::string chip;	/* gpiod: chip name ("gpiochip0"), path, or label ("pinctrl-rp1") */
-	int line = -1;		/* gpiod: line offset on the chip */
+	std::string backend; /* "gpiod", "recording" */
+	std::string chip; /* gpiod: chip name ("gpiochip0"), path, or label ("pinctrl-rp1") */
+	int line = -1; /* gpiod: line offset on the chip */
 	bool active_low = false;
 	StrobeMode mode = StrobeMode::Constant;
 	/* Alternate mode: light this long around each lit exposure. */
@@ -72,17 +79,17 @@ struct StrobeSection {
 };
 
 struct CanSection {
-	std::string backend;	/* "socketcan", "file", "loopback" */
-	std::string interface;	/* socketcan: "can0" */
-	std::string log_file;	/* file: candump -l log written here (--can-log overrides) */
-	std::uint32_t base_id = 0x300;	/* 11-bit; base_id .. base_id + 0x10 are used */
-	int bitrate = 500000;	/* the bus's bit rate, for the bus-load check and docs */
+	std::string backend; /* "socketcan", "file", "loopback" */
+	std::string interface; /* socketcan: "can0" */
+	std::string log_file; /* file: candump -l log written here (--can-log overrides) */
+	std::uint32_t base_id = 0x300; /* 11-bit; base_id .. base_id + 0x10 are used */
+	int bitrate = 500000; /* the bus's bit rate, for the bus-load check and docs */
 	int tx_queue_depth = 32;
 	int heartbeat_hz = 10;
 };
 
 struct PipelineSection {
-	std::string target;	/* target JSON */
+	std::string target; /* target JSON */
 	TrackMode mode = TrackMode::Track;
 	double max_rms_px = 0.6;
 	/* Acceptance bound of the full search: log10 of the number of false alarms
@@ -102,12 +109,12 @@ struct PipelineSection {
 };
 
 struct SystemdSection {
-	bool notify = true;	/* sd_notify READY/STATUS/WATCHDOG when NOTIFY_SOCKET is set */
+	bool notify = true; /* sd_notify READY/STATUS/WATCHDOG when NOTIFY_SOCKET is set */
 };
 
 struct BoardConfig {
-	std::string board;	/* "sim", "rpi5-imx296", ... : must match a board built into dockposed */
-	std::string path;	/* the file it was read from */
+	std::string board; /* "sim", "rpi5-imx296", ... : must match a board built into dockposed */
+	std::string path; /* the file it was read from */
 	CameraSection camera;
 	StrobeSection strobe;
 	CanSection can;
@@ -117,7 +124,7 @@ struct BoardConfig {
 
 struct ConfigResult {
 	BoardConfig config;
-	std::vector<std::string> errors;	/* empty: valid */
+	std::vector<std::string> errors; /* empty: valid */
 	bool ok() const { return errors.empty(); }
 };
 

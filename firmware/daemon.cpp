@@ -74,19 +74,27 @@ PipelineConfig pipelineConfig(const PipelineSection &section)
 } /* namespace */
 
 Daemon::Daemon(const BoardConfig &config, board::Backends backends, std::FILE *log)
-	: config_(config), backends_(std::move(backends)), log_(log),
+	: config_(config),
+	  backends_(std::move(backends)),
+	  log_(log),
 	  state_machine_(config.pipeline.lost_after_frames, config.pipeline.degraded_hold_frames),
-	  encoder_(config.can.base_id), command_decoder_(config.can.base_id), notifier_(config.systemd.notify),
-	  strobe_mode_(config.strobe.mode), track_mode_(config.pipeline.mode), exposure_us_(config.camera.exposure_us),
+	  encoder_(config.can.base_id),
+	  command_decoder_(config.can.base_id),
+	  notifier_(config.systemd.notify),
+	  strobe_mode_(config.strobe.mode),
+	  track_mode_(config.pipeline.mode),
+	  exposure_us_(config.camera.exposure_us),
 	  gain_(config.camera.analogue_gain),
-	  period_ns_(static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz)), measured_period_ns_(period_ns_)
+	  period_ns_(static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz)),
+	  measured_period_ns_(period_ns_)
 {
 	/* The configuration was validated (both files load); a failure here is a bug upstream,
 	 * reported by start(). */
 	auto target = loadTargetModel(config_.pipeline.target);
 	auto intrinsics = loadCameraIntrinsics(config_.camera.intrinsics);
 	if (target.ok() && intrinsics.ok()) {
-		pipeline_ = std::make_unique<Pipeline>(target.value, intrinsics.value, pipelineConfig(config_.pipeline));
+		pipeline_ = std::make_unique<Pipeline>(target.value, intrinsics.value,
+						       pipelineConfig(config_.pipeline));
 		ambient_ = Image(intrinsics.value.width, intrinsics.value.height);
 		difference_ = Image(intrinsics.value.width, intrinsics.value.height);
 	}
@@ -100,7 +108,8 @@ Daemon::~Daemon()
 hal::Status Daemon::start()
 {
 	if (!pipeline_)
-		return hal::Status::error("cannot load " + config_.pipeline.target + " or " + config_.camera.intrinsics);
+		return hal::Status::error("cannot load " + config_.pipeline.target + " or " +
+					  config_.camera.intrinsics);
 	if (!backends_.strobe || !backends_.strobe_control || !backends_.camera || !backends_.can)
 		return hal::Status::error("board " + config_.board + ": wiring left a backend out");
 
@@ -113,7 +122,9 @@ hal::Status Daemon::start()
 	const hal::CanFilter commands{ config_.can.base_id + can::kCommand, 0x7ff, false };
 	hal::CanOptions can_options;
 	can_options.tx_queue_depth = config_.can.tx_queue_depth;
-	if (auto s = backends_.can->open(std::span<const hal::CanFilter>(&commands, 1), can_options); !s)
+	if (auto s =
+		    backends_.can->open(std::span<const hal::CanFilter>(&commands, 1), can_options);
+	    !s)
 		return hal::Status::error("can: " + s.message());
 
 	hal::CameraConfig camera;
@@ -123,16 +134,18 @@ hal::Status Daemon::start()
 	camera.height = config_.camera.height;
 	camera.exposure_us = config_.camera.exposure_us;
 	camera.analogue_gain = config_.camera.analogue_gain;
-	camera.frame_duration_us = static_cast<int>(std::lround(1e6 / config_.camera.frame_rate_hz));
+	camera.frame_duration_us =
+		static_cast<int>(std::lround(1e6 / config_.camera.frame_rate_hz));
 	camera.buffer_count = config_.camera.buffer_count;
 	if (auto s = backends_.camera->configure(camera); !s)
 		return hal::Status::error("camera: " + s.message());
 	const auto &k = pipeline_->camera().intrinsics();
 	if (backends_.camera->width() != k.width || backends_.camera->height() != k.height)
-		return hal::Status::error("camera: delivers " + std::to_string(backends_.camera->width()) + "x" +
-					  std::to_string(backends_.camera->height()) + " frames but the intrinsics (" +
-					  config_.camera.intrinsics + ") are for " + std::to_string(k.width) + "x" +
-					  std::to_string(k.height));
+		return hal::Status::error(
+			"camera: delivers " + std::to_string(backends_.camera->width()) + "x" +
+			std::to_string(backends_.camera->height()) +
+			" frames but the intrinsics (" + config_.camera.intrinsics + ") are for " +
+			std::to_string(k.width) + "x" + std::to_string(k.height));
 	if (auto s = backends_.camera->start(); !s)
 		return hal::Status::error("camera: " + s.message());
 
@@ -143,8 +156,9 @@ hal::Status Daemon::start()
 	started_ = true;
 	applyStrobeMode(strobe_mode_);
 	std::fprintf(log_, "dockposed: board %s: camera %s, strobe %s (%s), can %s (base 0x%03x)\n",
-		     config_.board.c_str(), backends_.camera->name().c_str(), backends_.strobe->name().c_str(),
-		     strobeModeName(strobe_mode_), backends_.can->name().c_str(), config_.can.base_id);
+		     config_.board.c_str(), backends_.camera->name().c_str(),
+		     backends_.strobe->name().c_str(), strobeModeName(strobe_mode_),
+		     backends_.can->name().c_str(), config_.can.base_id);
 	notifier_.ready();
 	return hal::Status::ok();
 }
@@ -153,7 +167,8 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 {
 	if (!started_)
 		return 1;
-	const std::int64_t end_ns = run_for_s > 0 ? start_ns_ + static_cast<std::int64_t>(run_for_s * 1e9) : 0;
+	const std::int64_t end_ns =
+		run_for_s > 0 ? start_ns_ + static_cast<std::int64_t>(run_for_s * 1e9) : 0;
 	int exit_status = 0;
 
 	while (!stop_requested.load(std::memory_order_relaxed)) {
@@ -176,7 +191,8 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 		} else {
 			if (result == hal::WaitResult::Error && !camera_failed_) {
 				camera_failed_ = true;
-				std::fprintf(log_, "dockposed: camera error: %s\n", backends_.camera->lastError().c_str());
+				std::fprintf(log_, "dockposed: camera error: %s\n",
+					     backends_.camera->lastError().c_str());
 			}
 			handleStall(now_ns);
 		}
@@ -251,14 +267,18 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 	last_sequence_ = frame.sequence;
 
 	/* Behind by more than two frame periods: the loop cannot keep up. */
-	if (frame.timestamp_ns > 0 && now_ns - frame.timestamp_ns > 2 * period_ns_ + frame.exposure_us * 1000LL)
+	if (frame.timestamp_ns > 0 &&
+	    now_ns - frame.timestamp_ns > 2 * period_ns_ + frame.exposure_us * 1000LL)
 		overrun_until_ns_ = now_ns + kFaultHoldNs;
 
 	const auto &k = pipeline_->camera().intrinsics();
-	if (!frame.image.valid() || frame.image.width != k.width || frame.image.height != k.height) {
+	if (!frame.image.valid() || frame.image.width != k.width ||
+	    frame.image.height != k.height) {
 		if (stats_.frames_bad++ == 0)
-			std::fprintf(log_, "dockposed: rejecting a %dx%d frame (expected %dx%d); counting further ones\n",
-				     frame.image.width, frame.image.height, k.width, k.height);
+			std::fprintf(
+				log_,
+				"dockposed: rejecting a %dx%d frame (expected %dx%d); counting further ones\n",
+				frame.image.width, frame.image.height, k.width, k.height);
 		return;
 	}
 
@@ -266,8 +286,10 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 	if (strobe_mode_ == StrobeMode::Alternate && enabled_)
 		scheduleAlternatePulses(frame);
 
-	const std::int64_t exposure_end_ns = frame.timestamp_ns + static_cast<std::int64_t>(frame.exposure_us) * 1000;
-	const hal::Lighting lighting = backends_.strobe_control->lighting(frame.timestamp_ns, exposure_end_ns);
+	const std::int64_t exposure_end_ns =
+		frame.timestamp_ns + static_cast<std::int64_t>(frame.exposure_us) * 1000;
+	const hal::Lighting lighting =
+		backends_.strobe_control->lighting(frame.timestamp_ns, exposure_end_ns);
 	switch (lighting) {
 	case hal::Lighting::Lit:
 		++stats_.frames_lit;
@@ -296,13 +318,16 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 	case StrobeMode::Alternate:
 		if (lighting == hal::Lighting::Unlit) {
 			for (int y = 0; y < frame.image.height; ++y)
-				std::memcpy(ambient_.data() + static_cast<std::ptrdiff_t>(y) * ambient_.width(),
-					    frame.image.row(y), static_cast<std::size_t>(frame.image.width));
+				std::memcpy(ambient_.data() + static_cast<std::ptrdiff_t>(y) *
+								      ambient_.width(),
+					    frame.image.row(y),
+					    static_cast<std::size_t>(frame.image.width));
 			ambient_sequence_ = frame.sequence;
 			have_ambient_ = true;
 		} else if (lighting == hal::Lighting::Lit && have_ambient_ &&
 			   frame.sequence - ambient_sequence_ <= 2) {
-			subtractAmbient(frame.image, ambient_.view(), difference_.data(), difference_.width());
+			subtractAmbient(frame.image, ambient_.view(), difference_.data(),
+					difference_.width());
 			processView(difference_.view(), frame);
 		}
 		break;
@@ -375,11 +400,14 @@ void Daemon::measurePeriod(const hal::Frame &frame)
 {
 	if (frame.timestamp_ns <= 0)
 		return;
-	if (have_period_sample_ && frame.sequence > period_sequence_ && frame.timestamp_ns > period_timestamp_ns_) {
-		const std::int64_t interval_ns = (frame.timestamp_ns - period_timestamp_ns_) /
-						 static_cast<std::int64_t>(frame.sequence - period_sequence_);
+	if (have_period_sample_ && frame.sequence > period_sequence_ &&
+	    frame.timestamp_ns > period_timestamp_ns_) {
+		const std::int64_t interval_ns =
+			(frame.timestamp_ns - period_timestamp_ns_) /
+			static_cast<std::int64_t>(frame.sequence - period_sequence_);
 		/* Intervals across a stall say nothing about the frame grid. */
-		if (interval_ns < static_cast<std::int64_t>(config_.camera.stall_timeout_ms) * kNsPerMs) {
+		if (interval_ns <
+		    static_cast<std::int64_t>(config_.camera.stall_timeout_ms) * kNsPerMs) {
 			if (!have_period_measured_)
 				measured_period_ns_ = interval_ns;
 			else
@@ -399,7 +427,8 @@ void Daemon::scheduleAlternatePulses(const hal::Frame &frame)
 	/* Light every even frame: aim a pulse at the predicted exposure of the next even frames
 	 * that are not yet scheduled. The exposure grid comes from the sensor's own timestamps: this
 	 * frame's start of exposure and the period measured between frames. */
-	const std::int64_t margin_ns = static_cast<std::int64_t>(config_.strobe.pulse_margin_us) * 1000;
+	const std::int64_t margin_ns =
+		static_cast<std::int64_t>(config_.strobe.pulse_margin_us) * 1000;
 	const std::int64_t exposure_ns = static_cast<std::int64_t>(frame.exposure_us) * 1000;
 	/* Frames may reach us several periods after their exposure (a slow pipeline, an emulated
 	 * machine): look as far ahead as it takes to find exposures that have not begun, and keep
@@ -410,8 +439,9 @@ void Daemon::scheduleAlternatePulses(const hal::Frame &frame)
 		const std::uint64_t target = frame.sequence + k;
 		if (target % 2 != 0)
 			continue;
-		const std::int64_t start_ns =
-			frame.timestamp_ns + static_cast<std::int64_t>(k) * measured_period_ns_ - margin_ns;
+		const std::int64_t start_ns = frame.timestamp_ns +
+					      static_cast<std::int64_t>(k) * measured_period_ns_ -
+					      margin_ns;
 		if (start_ns < lead_ns)
 			continue;
 		if (last_scheduled_sequence_ && target <= last_scheduled_sequence_) {
@@ -427,7 +457,8 @@ void Daemon::scheduleAlternatePulses(const hal::Frame &frame)
 
 void Daemon::handleStall(std::int64_t now_ns)
 {
-	const std::int64_t stall_ns = static_cast<std::int64_t>(config_.camera.stall_timeout_ms) * kNsPerMs;
+	const std::int64_t stall_ns =
+		static_cast<std::int64_t>(config_.camera.stall_timeout_ms) * kNsPerMs;
 	if (!camera_failed_ && now_ns - last_frame_ns_ < stall_ns)
 		return;
 	if (!stalled_) {
@@ -455,7 +486,8 @@ void Daemon::handleStall(std::int64_t now_ns)
 			++stats_.camera_restarts;
 			std::fprintf(log_, "dockposed: camera restarted\n");
 		} else {
-			std::fprintf(log_, "dockposed: camera restart failed: %s\n", s.message().c_str());
+			std::fprintf(log_, "dockposed: camera restart failed: %s\n",
+				     s.message().c_str());
 		}
 	}
 }
@@ -481,7 +513,8 @@ void Daemon::sendHeartbeat(std::int64_t now_ns)
 {
 	next_heartbeat_ns_ = now_ns + kNsPerS / std::max(1, config_.can.heartbeat_hz);
 	if (now_ns - rate_start_ns_ >= kNsPerS) {
-		frame_rate_hz_ = static_cast<double>(rate_frames_) * 1e9 / static_cast<double>(now_ns - rate_start_ns_);
+		frame_rate_hz_ = static_cast<double>(rate_frames_) * 1e9 /
+				 static_cast<double>(now_ns - rate_start_ns_);
 		rate_frames_ = 0;
 		rate_start_ns_ = now_ns;
 	}
@@ -512,7 +545,8 @@ void Daemon::handleCommands()
 		can::RawFrame raw;
 		raw.id = in.id;
 		raw.len = in.len;
-		std::copy_n(in.data.begin(), std::min<std::size_t>(in.len, raw.data.size()), raw.data.begin());
+		std::copy_n(in.data.begin(), std::min<std::size_t>(in.len, raw.data.size()),
+			    raw.data.begin());
 		const can::Decoder::Event event = command_decoder_.feed(raw);
 		if (event == can::Decoder::Event::Command) {
 			applyCommand(command_decoder_.command());
@@ -534,8 +568,10 @@ void Daemon::applyCommand(const can::CommandData &command)
 	if (exposure_us < 10 || exposure_us > period_us || gain < 1.0 || gain > 64.0) {
 		++stats_.commands_rejected;
 		command_rejected_until_ns_ = hal::monotonicNs() + kFaultHoldNs;
-		std::fprintf(log_, "dockposed: command rejected: exposure %d us / gain %.1f outside [10, %.0f] us / [1, 64]\n",
-			     exposure_us, gain, period_us);
+		std::fprintf(
+			log_,
+			"dockposed: command rejected: exposure %d us / gain %.1f outside [10, %.0f] us / [1, 64]\n",
+			exposure_us, gain, period_us);
 		return;
 	}
 	++stats_.commands;
@@ -549,7 +585,8 @@ void Daemon::applyCommand(const can::CommandData &command)
 			std::fprintf(log_, "dockposed: camera controls: %s\n", s.message().c_str());
 		}
 	}
-	const TrackMode mode = command.mode == can::TrackMode::SearchOnly ? TrackMode::SearchOnly : TrackMode::Track;
+	const TrackMode mode = command.mode == can::TrackMode::SearchOnly ? TrackMode::SearchOnly
+									  : TrackMode::Track;
 	StrobeMode strobe = strobe_mode_;
 	switch (command.strobe) {
 	case can::StrobeMode::Off:
@@ -564,15 +601,18 @@ void Daemon::applyCommand(const can::CommandData &command)
 	case can::StrobeMode::Unchanged:
 		break;
 	}
-	const bool changed = command.enable != enabled_ || mode != track_mode_ || strobe != strobe_mode_;
+	const bool changed = command.enable != enabled_ || mode != track_mode_ ||
+			     strobe != strobe_mode_;
 	enabled_ = command.enable;
 	if (mode != track_mode_) {
 		track_mode_ = mode;
 		pipeline_->reset();
 	}
 	if (changed) {
-		std::fprintf(log_, "dockposed: command: %s, %s, strobe %s, exposure %d us, gain %.1f\n",
-			     enabled_ ? "enabled" : "disabled", mode == TrackMode::Track ? "track" : "search only",
+		std::fprintf(log_,
+			     "dockposed: command: %s, %s, strobe %s, exposure %d us, gain %.1f\n",
+			     enabled_ ? "enabled" : "disabled",
+			     mode == TrackMode::Track ? "track" : "search only",
 			     strobeModeName(strobe), exposure_us_, gain_);
 	}
 	applyStrobeMode(strobe);
@@ -658,7 +698,8 @@ void Daemon::updateSystemdStatus(std::int64_t now_ns)
 	char text[160];
 	std::snprintf(text, sizeof(text), "%s, %.1f frames/s, %llu poses, latency p50 %.2f ms",
 		      can::sensorStateName(state_machine_.state()), frame_rate_hz_,
-		      static_cast<unsigned long long>(stats_.poses_valid), stats_.latency.quantileMs(0.5));
+		      static_cast<unsigned long long>(stats_.poses_valid),
+		      stats_.latency.quantileMs(0.5));
 	notifier_.status(text);
 }
 
@@ -666,20 +707,23 @@ void Daemon::printSummary(std::FILE *out) const
 {
 	const hal::CameraStats camera = backends_.camera->stats();
 	const hal::CanStats can_stats = backends_.can->stats();
-	std::fprintf(out,
-		     "dockposed: %.1f s: %llu frames (%.1f/s; lit %llu, unlit %llu, mixed %llu, dropped %llu), "
-		     "%llu reports, %llu valid poses; latency p50 %.2f ms, p99 %.2f ms, max %.2f ms; "
-		     "pipeline p50 %.2f ms; CAN %llu frames sent, %llu dropped\n",
-		     stats_.run_s, static_cast<unsigned long long>(stats_.frames),
-		     stats_.run_s > 0 ? static_cast<double>(stats_.frames) / stats_.run_s : 0.0,
-		     static_cast<unsigned long long>(stats_.frames_lit),
-		     static_cast<unsigned long long>(stats_.frames_unlit),
-		     static_cast<unsigned long long>(stats_.frames_mixed),
-		     static_cast<unsigned long long>(camera.dropped), static_cast<unsigned long long>(stats_.reports),
-		     static_cast<unsigned long long>(stats_.poses_valid), stats_.latency.quantileMs(0.5),
-		     stats_.latency.quantileMs(0.99), stats_.latency.maxMs(), stats_.pipeline.quantileMs(0.5),
-		     static_cast<unsigned long long>(can_stats.tx_frames),
-		     static_cast<unsigned long long>(can_stats.tx_dropped));
+	std::fprintf(
+		out,
+		"dockposed: %.1f s: %llu frames (%.1f/s; lit %llu, unlit %llu, mixed %llu, dropped %llu), "
+		"%llu reports, %llu valid poses; latency p50 %.2f ms, p99 %.2f ms, max %.2f ms; "
+		"pipeline p50 %.2f ms; CAN %llu frames sent, %llu dropped\n",
+		stats_.run_s, static_cast<unsigned long long>(stats_.frames),
+		stats_.run_s > 0 ? static_cast<double>(stats_.frames) / stats_.run_s : 0.0,
+		static_cast<unsigned long long>(stats_.frames_lit),
+		static_cast<unsigned long long>(stats_.frames_unlit),
+		static_cast<unsigned long long>(stats_.frames_mixed),
+		static_cast<unsigned long long>(camera.dropped),
+		static_cast<unsigned long long>(stats_.reports),
+		static_cast<unsigned long long>(stats_.poses_valid), stats_.latency.quantileMs(0.5),
+		stats_.latency.quantileMs(0.99), stats_.latency.maxMs(),
+		stats_.pipeline.quantileMs(0.5),
+		static_cast<unsigned long long>(can_stats.tx_frames),
+		static_cast<unsigned long long>(can_stats.tx_dropped));
 }
 
 } /* namespace dockpose::firmware */

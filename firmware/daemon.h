@@ -39,24 +39,24 @@
 namespace dockpose::firmware {
 
 struct DaemonStats {
-	std::uint64_t frames = 0;		/* frames from the camera */
+	std::uint64_t frames = 0; /* frames from the camera */
 	std::uint64_t frames_lit = 0;
 	std::uint64_t frames_unlit = 0;
-	std::uint64_t frames_mixed = 0;		/* exposure straddled a strobe switch: not used */
-	std::uint64_t frames_bad = 0;		/* wrong size / invalid view: rejected */
-	std::uint64_t sequence_gaps = 0;	/* frames the sensor numbered but we never saw */
-	std::uint64_t processed = 0;		/* frames that went through the pipeline */
-	std::uint64_t poses_valid = 0;		/* reports sent with a valid pose */
-	std::uint64_t reports = 0;		/* status frames sent for processed frames */
-	std::uint64_t stall_reports = 0;	/* status frames sent while the camera stalled */
-	std::uint64_t stalls = 0;		/* stall episodes */
+	std::uint64_t frames_mixed = 0; /* exposure straddled a strobe switch: not used */
+	std::uint64_t frames_bad = 0; /* wrong size / invalid view: rejected */
+	std::uint64_t sequence_gaps = 0; /* frames the sensor numbered but we never saw */
+	std::uint64_t processed = 0; /* frames that went through the pipeline */
+	std::uint64_t poses_valid = 0; /* reports sent with a valid pose */
+	std::uint64_t reports = 0; /* status frames sent for processed frames */
+	std::uint64_t stall_reports = 0; /* status frames sent while the camera stalled */
+	std::uint64_t stalls = 0; /* stall episodes */
 	std::uint64_t camera_restarts = 0;
 	std::uint64_t heartbeats = 0;
-	std::uint64_t commands = 0;		/* command frames applied */
-	std::uint64_t commands_rejected = 0;	/* command frames with bad CRC/length/values */
-	std::uint64_t can_send_drops = 0;	/* sends that dropped an older queued frame */
-	LatencyHistogram latency;		/* sensor timestamp -> CAN send, per report */
-	LatencyHistogram pipeline;		/* time in Pipeline::process, per processed frame */
+	std::uint64_t commands = 0; /* command frames applied */
+	std::uint64_t commands_rejected = 0; /* command frames with bad CRC/length/values */
+	std::uint64_t can_send_drops = 0; /* sends that dropped an older queued frame */
+	LatencyHistogram latency; /* sensor timestamp -> CAN send, per report */
+	LatencyHistogram pipeline; /* time in Pipeline::process, per processed frame */
 	double run_s = 0.0;
 };
 
@@ -133,7 +133,7 @@ private:
 	bool have_ambient_ = false;
 	Image difference_;
 	std::uint64_t last_scheduled_sequence_ = 0;
-	std::int64_t period_ns_;	/* configured frame period */
+	std::int64_t period_ns_; /* configured frame period */
 	/* The sensor's real frame period, from its timestamps (smoothed); pulses are aimed with it.
 	 * Starts at the configured period, which a camera that ignores frame_rate_hz does not keep. */
 	std::int64_t measured_period_ns_;

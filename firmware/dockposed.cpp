@@ -73,7 +73,8 @@ void armStartupWatchdog(int timeout_s)
 		      timeout_s);
 	std::snprintf(g_startup_tail, sizeof(g_startup_tail), "; exiting with status %d\n",
 		      kExitStartupHung);
-	struct sigaction alarm_action {};
+	struct sigaction alarm_action {
+	};
 	alarm_action.sa_handler = onStartupTimeout;
 	sigemptyset(&alarm_action.sa_mask);
 	sigaction(SIGALRM, &alarm_action, nullptr);
@@ -95,13 +96,15 @@ void onFatalSignal(int sig)
 
 void installSignalHandlers()
 {
-	struct sigaction stop {};
+	struct sigaction stop {
+	};
 	stop.sa_handler = onStopSignal;
 	sigemptyset(&stop.sa_mask);
 	for (int sig : { SIGTERM, SIGINT, SIGHUP })
 		sigaction(sig, &stop, nullptr);
 
-	struct sigaction fatal {};
+	struct sigaction fatal {
+	};
 	fatal.sa_handler = onFatalSignal;
 	sigemptyset(&fatal.sa_mask);
 	fatal.sa_flags = static_cast<int>(SA_RESETHAND);
@@ -137,13 +140,18 @@ int main(int argc, char **argv)
 	std::string board_path;
 	double run_for_s = 0.0;
 	std::string can_log;
-	app.add_option("--board", board_path, "the board's configuration file (board/<name>/board.json)")->required();
-	app.add_option("--for", run_for_s, "run this many seconds, then shut down cleanly (0: until SIGTERM)")
+	app.add_option("--board", board_path,
+		       "the board's configuration file (board/<name>/board.json)")
+		->required();
+	app.add_option("--for", run_for_s,
+		       "run this many seconds, then shut down cleanly (0: until SIGTERM)")
 		->check(CLI::NonNegativeNumber);
-	app.add_option("--can-log", can_log, "write CAN frames to this candump log (boards whose CAN backend is 'file')");
+	app.add_option("--can-log", can_log,
+		       "write CAN frames to this candump log (boards whose CAN backend is 'file')");
 	int startup_timeout_s = kDefaultStartupTimeoutS;
-	app.add_option("--startup-timeout", startup_timeout_s,
-		       "seconds the backends may take to open and start before dockposed gives up (exit 75)")
+	app.add_option(
+		   "--startup-timeout", startup_timeout_s,
+		   "seconds the backends may take to open and start before dockposed gives up (exit 75)")
 		->check(CLI::Range(1, 600))
 		->capture_default_str();
 	try {
@@ -154,8 +162,8 @@ int main(int argc, char **argv)
 
 	firmware::ConfigResult loaded = firmware::loadBoardConfig(board_path);
 	if (!loaded.ok()) {
-		std::fprintf(stderr, "dockposed: %s: %zu error(s) in the board file:\n", board_path.c_str(),
-			     loaded.errors.size());
+		std::fprintf(stderr, "dockposed: %s: %zu error(s) in the board file:\n",
+			     board_path.c_str(), loaded.errors.size());
 		for (const std::string &e : loaded.errors)
 			std::fprintf(stderr, "  %s\n", e.c_str());
 		return 2;
@@ -167,8 +175,10 @@ int main(int argc, char **argv)
 		std::string built;
 		for (const board::BoardInfo &b : board::boards())
 			built += (built.empty() ? "" : ", ") + std::string(b.name);
-		std::fprintf(stderr, "dockposed: %s: board \"%s\" is not built into this dockposed (built: %s)\n",
-			     board_path.c_str(), config.board.c_str(), built.c_str());
+		std::fprintf(
+			stderr,
+			"dockposed: %s: board \"%s\" is not built into this dockposed (built: %s)\n",
+			board_path.c_str(), config.board.c_str(), built.c_str());
 		return 2;
 	}
 	struct {
@@ -183,8 +193,11 @@ int main(int argc, char **argv)
 	bool wiring_ok = true;
 	for (const auto &b : backends) {
 		if (!contains(b.allowed, b.value)) {
-			std::fprintf(stderr, "dockposed: %s: %s: board %s has no \"%s\" backend (it has: %s)\n",
-				     board_path.c_str(), b.section, info->name, b.value.c_str(), join(b.allowed).c_str());
+			std::fprintf(
+				stderr,
+				"dockposed: %s: %s: board %s has no \"%s\" backend (it has: %s)\n",
+				board_path.c_str(), b.section, info->name, b.value.c_str(),
+				join(b.allowed).c_str());
 			wiring_ok = false;
 		}
 	}
@@ -192,8 +205,11 @@ int main(int argc, char **argv)
 		return 2;
 	if (!can_log.empty()) {
 		if (config.can.backend != "file") {
-			std::fprintf(stderr, "dockposed: --can-log only applies to boards whose CAN backend is \"file\" "
-					     "(%s uses \"%s\")\n", info->name, config.can.backend.c_str());
+			std::fprintf(
+				stderr,
+				"dockposed: --can-log only applies to boards whose CAN backend is \"file\" "
+				"(%s uses \"%s\")\n",
+				info->name, config.can.backend.c_str());
 			return 2;
 		}
 		config.can.log_file = can_log;

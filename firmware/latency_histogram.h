@@ -29,7 +29,11 @@ public:
 	}
 
 	std::uint64_t count() const { return count_; }
-	double meanMs() const { return count_ ? static_cast<double>(sum_ns_) / static_cast<double>(count_) * 1e-6 : 0.0; }
+	double meanMs() const
+	{
+		return count_ ? static_cast<double>(sum_ns_) / static_cast<double>(count_) * 1e-6
+			      : 0.0;
+	}
 	double maxMs() const { return static_cast<double>(max_ns_) * 1e-6; }
 	/* The upper edge of the bin holding quantile p (0..1). */
 	double quantileMs(double p) const
@@ -41,7 +45,9 @@ public:
 		for (std::size_t i = 0; i < bins_.size(); ++i) {
 			seen += bins_[i];
 			if (seen > rank)
-				return static_cast<double>((static_cast<std::int64_t>(i) + 1) * kBinNs) * 1e-6;
+				return static_cast<double>((static_cast<std::int64_t>(i) + 1) *
+							   kBinNs) *
+				       1e-6;
 		}
 		return maxMs();
 	}

@@ -18,7 +18,8 @@ SensorState StateMachine::update(const StateInputs &in)
 		return state_;
 
 	frames_since_valid_ = in.pose_valid ? 0 : saturatingIncrement(frames_since_valid_);
-	frames_since_degrading_ = (in.faults & kDegradingFaults) ? 0 : saturatingIncrement(frames_since_degrading_);
+	frames_since_degrading_ =
+		(in.faults & kDegradingFaults) ? 0 : saturatingIncrement(frames_since_degrading_);
 
 	if (in.faults & kFatalFaults) {
 		state_ = SensorState::Fault;

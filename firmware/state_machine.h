@@ -31,15 +31,16 @@ namespace dockpose::firmware {
 using SensorState = can::SensorState;
 
 struct StateInputs {
-	bool pose_valid = false;	/* this frame gave a valid pose */
-	std::uint8_t faults = 0;	/* can::fault bits active now */
+	bool pose_valid = false; /* this frame gave a valid pose */
+	std::uint8_t faults = 0; /* can::fault bits active now */
 };
 
 class StateMachine
 {
 public:
 	StateMachine(int lost_after_frames, int degraded_hold_frames)
-		: lost_after_frames_(lost_after_frames), degraded_hold_frames_(degraded_hold_frames)
+		: lost_after_frames_(lost_after_frames),
+		  degraded_hold_frames_(degraded_hold_frames)
 	{
 	}
 
@@ -52,10 +53,12 @@ public:
 	int framesSinceValid() const { return frames_since_valid_; }
 
 	/* Faults that put the sensor into fault (no usable frames). */
-	static constexpr std::uint8_t kFatalFaults = can::fault::kCameraStall | can::fault::kCameraError;
+	static constexpr std::uint8_t kFatalFaults = can::fault::kCameraStall |
+						     can::fault::kCameraError;
 	/* Faults that degrade an otherwise tracking sensor. */
-	static constexpr std::uint8_t kDegradingFaults = can::fault::kStrobeError | can::fault::kCanTxOverflow |
-		can::fault::kCanBusOff | can::fault::kFramesDropped | can::fault::kLoopOverrun;
+	static constexpr std::uint8_t kDegradingFaults =
+		can::fault::kStrobeError | can::fault::kCanTxOverflow | can::fault::kCanBusOff |
+		can::fault::kFramesDropped | can::fault::kLoopOverrun;
 
 private:
 	int lost_after_frames_;

@@ -46,25 +46,25 @@ struct CameraConfig {
 };
 
 struct Frame {
-	ImageView image;		/* 8-bit intensity, stride honoured */
-	std::uint64_t sequence = 0;	/* sensor frame sequence number; gaps = frames lost */
-	std::int64_t timestamp_ns = 0;	/* start of exposure, CLOCK_MONOTONIC (hal/clock.h) */
-	std::int32_t exposure_us = 0;	/* exposure the sensor reports for this frame */
+	ImageView image; /* 8-bit intensity, stride honoured */
+	std::uint64_t sequence = 0; /* sensor frame sequence number; gaps = frames lost */
+	std::int64_t timestamp_ns = 0; /* start of exposure, CLOCK_MONOTONIC (hal/clock.h) */
+	std::int32_t exposure_us = 0; /* exposure the sensor reports for this frame */
 	float analogue_gain = 1.0f;
-	std::int32_t slot = -1;		/* backend's buffer slot: pass back to releaseFrame() */
+	std::int32_t slot = -1; /* backend's buffer slot: pass back to releaseFrame() */
 };
 
 enum class WaitResult : std::uint8_t {
-	Frame,		/* *frame is valid until releaseFrame() */
-	Timeout,	/* no frame within the timeout: the camera stalls */
-	Stopped,	/* the camera is not running, or ran out of frames (replay) */
-	Error,		/* the camera failed; lastError() says why */
+	Frame, /* *frame is valid until releaseFrame() */
+	Timeout, /* no frame within the timeout: the camera stalls */
+	Stopped, /* the camera is not running, or ran out of frames (replay) */
+	Error, /* the camera failed; lastError() says why */
 };
 
 struct CameraStats {
-	std::uint64_t frames = 0;	/* frames delivered to waitFrame() */
-	std::uint64_t dropped = 0;	/* frames dropped because the frame thread was behind */
-	std::uint64_t errors = 0;	/* frames that completed with an error / were corrupt */
+	std::uint64_t frames = 0; /* frames delivered to waitFrame() */
+	std::uint64_t dropped = 0; /* frames dropped because the frame thread was behind */
+	std::uint64_t errors = 0; /* frames that completed with an error / were corrupt */
 };
 
 class Camera

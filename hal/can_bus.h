@@ -26,12 +26,12 @@
 namespace dockpose::hal {
 
 struct CanFrame {
-	std::uint32_t id = 0;		/* 11-bit, or 29-bit when extended */
+	std::uint32_t id = 0; /* 11-bit, or 29-bit when extended */
 	bool extended = false;
-	bool fd = false;		/* CAN FD frame (backends may refuse) */
-	std::uint8_t len = 0;		/* data bytes: 0..8 classic, up to 64 FD */
+	bool fd = false; /* CAN FD frame (backends may refuse) */
+	std::uint8_t len = 0; /* data bytes: 0..8 classic, up to 64 FD */
 	std::array<std::uint8_t, 64> data{};
-	std::int64_t timestamp_ns = 0;	/* reception (or send) time, CLOCK_MONOTONIC */
+	std::int64_t timestamp_ns = 0; /* reception (or send) time, CLOCK_MONOTONIC */
 };
 
 /* A received frame passes when (frame.id & mask) == (id & mask). */
@@ -47,26 +47,26 @@ enum class CanState : std::uint8_t {
 	ErrorWarning,
 	ErrorPassive,
 	BusOff,
-	Down,		/* the interface is down or gone; the backend keeps trying to reopen it */
+	Down, /* the interface is down or gone; the backend keeps trying to reopen it */
 };
 
 const char *canStateName(CanState state);
 
 struct CanOptions {
-	int tx_queue_depth = 32;	/* frames; at least 1 */
-	bool fd = false;		/* enable CAN FD on the socket */
+	int tx_queue_depth = 32; /* frames; at least 1 */
+	bool fd = false; /* enable CAN FD on the socket */
 };
 
 struct CanStats {
-	std::uint64_t tx_frames = 0;		/* handed to the bus */
-	std::uint64_t tx_dropped = 0;		/* dropped from a full transmit queue */
-	std::uint64_t tx_enobufs = 0;		/* times the kernel said ENOBUFS/EAGAIN */
-	std::uint64_t tx_errors = 0;		/* other send errors */
-	std::uint64_t rx_frames = 0;		/* received through the filters */
-	std::uint64_t error_frames = 0;		/* CAN error frames seen */
-	std::uint64_t bus_off = 0;		/* bus-off events */
-	std::uint64_t restarts = 0;		/* recoveries (bus-off restarts, reopenings) */
-	std::uint32_t tx_queued = 0;		/* frames waiting in the queue now */
+	std::uint64_t tx_frames = 0; /* handed to the bus */
+	std::uint64_t tx_dropped = 0; /* dropped from a full transmit queue */
+	std::uint64_t tx_enobufs = 0; /* times the kernel said ENOBUFS/EAGAIN */
+	std::uint64_t tx_errors = 0; /* other send errors */
+	std::uint64_t rx_frames = 0; /* received through the filters */
+	std::uint64_t error_frames = 0; /* CAN error frames seen */
+	std::uint64_t bus_off = 0; /* bus-off events */
+	std::uint64_t restarts = 0; /* recoveries (bus-off restarts, reopenings) */
+	std::uint32_t tx_queued = 0; /* frames waiting in the queue now */
 	CanState state = CanState::Closed;
 };
 

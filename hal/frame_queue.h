@@ -24,7 +24,8 @@ namespace dockpose::hal {
 template<std::size_t Capacity>
 class FrameQueue
 {
-	static_assert(Capacity >= 2 && (Capacity & (Capacity - 1)) == 0, "capacity must be a power of two");
+	static_assert(Capacity >= 2 && (Capacity & (Capacity - 1)) == 0,
+		      "capacity must be a power of two");
 
 public:
 	FrameQueue()
@@ -74,7 +75,8 @@ private:
 		for (;;) {
 			if (head >= tail_.load(std::memory_order_acquire))
 				return false;
-			const std::int32_t v = slots_[head & (Capacity - 1)].load(std::memory_order_relaxed);
+			const std::int32_t v =
+				slots_[head & (Capacity - 1)].load(std::memory_order_relaxed);
 			if (head_.compare_exchange_weak(head, head + 1, std::memory_order_acq_rel,
 							std::memory_order_acquire)) {
 				*value = v;

@@ -12,11 +12,12 @@ namespace dockpose::hal {
 namespace {
 
 /* Copy one byte of every `step`, starting at `first`. */
-void extractBytes(const std::uint8_t *data, int width, int height, int stride_bytes, int first, int step,
-		  std::uint8_t *out, int out_stride)
+void extractBytes(const std::uint8_t *data, int width, int height, int stride_bytes, int first,
+		  int step, std::uint8_t *out, int out_stride)
 {
 	for (int y = 0; y < height; ++y) {
-		const std::uint8_t *src = data + static_cast<std::ptrdiff_t>(y) * stride_bytes + first;
+		const std::uint8_t *src =
+			data + static_cast<std::ptrdiff_t>(y) * stride_bytes + first;
 		std::uint8_t *dst = out + static_cast<std::ptrdiff_t>(y) * out_stride;
 		for (int x = 0; x < width; ++x)
 			dst[x] = src[static_cast<std::ptrdiff_t>(x) * step];
@@ -24,8 +25,8 @@ void extractBytes(const std::uint8_t *data, int width, int height, int stride_by
 }
 
 /* Luma of pixels `step` bytes apart whose R, G, B bytes sit at offsets r, g, b. */
-void lumaRows(const std::uint8_t *data, int width, int height, int stride_bytes, int step, int r, int g, int b,
-	      std::uint8_t *out, int out_stride)
+void lumaRows(const std::uint8_t *data, int width, int height, int stride_bytes, int step, int r,
+	      int g, int b, std::uint8_t *out, int out_stride)
 {
 	for (int y = 0; y < height; ++y) {
 		const std::uint8_t *src = data + static_cast<std::ptrdiff_t>(y) * stride_bytes;
@@ -103,8 +104,8 @@ int minStrideBytes(PixelLayout layout, int width)
 	return width * bytesPerPixel(layout);
 }
 
-bool toIntensity(const std::uint8_t *data, int width, int height, int stride_bytes, PixelLayout layout,
-		 std::uint8_t *out, int out_stride)
+bool toIntensity(const std::uint8_t *data, int width, int height, int stride_bytes,
+		 PixelLayout layout, std::uint8_t *out, int out_stride)
 {
 	if (!data || !out || width <= 0 || height <= 0 || bytesPerPixel(layout) == 0)
 		return false;

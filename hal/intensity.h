@@ -26,16 +26,16 @@
 namespace dockpose::hal {
 
 enum class PixelLayout : std::uint8_t {
-	Gray8,		/* one byte per pixel: R8 (V4L2 GREY, "Y8") */
-	YUV420,		/* planar: Y plane first (also YVU420) */
-	NV12,		/* semi-planar: Y plane first (also NV16) */
-	NV21,		/* semi-planar: Y plane first (also NV61) */
-	YUYV,		/* packed 4:2:2, Y at even bytes (also YVYU) */
-	UYVY,		/* packed 4:2:2, Y at odd bytes (also VYUY) */
-	RGB888,		/* bytes B, G, R */
-	BGR888,		/* bytes R, G, B */
-	XRGB8888,	/* bytes B, G, R, X */
-	XBGR8888,	/* bytes R, G, B, X */
+	Gray8, /* one byte per pixel: R8 (V4L2 GREY, "Y8") */
+	YUV420, /* planar: Y plane first (also YVU420) */
+	NV12, /* semi-planar: Y plane first (also NV16) */
+	NV21, /* semi-planar: Y plane first (also NV61) */
+	YUYV, /* packed 4:2:2, Y at even bytes (also YVYU) */
+	UYVY, /* packed 4:2:2, Y at odd bytes (also VYUY) */
+	RGB888, /* bytes B, G, R */
+	BGR888, /* bytes R, G, B */
+	XRGB8888, /* bytes B, G, R, X */
+	XBGR8888, /* bytes R, G, B, X */
 };
 
 /* "RGB888", "NV12", ... Allocates: never. */

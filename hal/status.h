@@ -25,7 +25,11 @@ public:
 	const std::string &message() const { return message_; }
 
 private:
-	explicit Status(std::string message) : failed_(true), message_(std::move(message)) {}
+	explicit Status(std::string message)
+		: failed_(true),
+		  message_(std::move(message))
+	{
+	}
 	bool failed_ = false;
 	std::string message_;
 };

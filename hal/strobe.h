@@ -47,9 +47,9 @@ public:
 
 /* How the LEDs were during a frame's exposure. */
 enum class Lighting : std::uint8_t {
-	Unlit,	/* off for the whole exposure */
-	Lit,	/* on for the whole exposure */
-	Mixed,	/* switched during the exposure, or not known: do not use the frame */
+	Unlit, /* off for the whole exposure */
+	Lit, /* on for the whole exposure */
+	Mixed, /* switched during the exposure, or not known: do not use the frame */
 };
 
 const char *lightingName(Lighting lighting);
@@ -117,22 +117,22 @@ private:
 	};
 	/* One Strobe::set, which switched the line somewhere in [before_ns, after_ns]. */
 	struct Switch {
-		std::int64_t before_ns;	/* just before the call */
-		std::int64_t after_ns;	/* when it returned */
-		bool on;		/* the level from then on */
-		bool known;		/* false after a failed set: the level is not known */
+		std::int64_t before_ns; /* just before the call */
+		std::int64_t after_ns; /* when it returned */
+		bool on; /* the level from then on */
+		bool known; /* false after a failed set: the level is not known */
 	};
 
 	void run();
 	/* Stall check, pulse bookkeeping, and drive the line to what it should be now. */
-	void update(std::int64_t now_ns);			/* with mutex_ held */
-	bool wantOn(std::int64_t now_ns) const;			/* with mutex_ held */
-	std::int64_t nextEventNs(std::int64_t now_ns) const;	/* with mutex_ held */
+	void update(std::int64_t now_ns); /* with mutex_ held */
+	bool wantOn(std::int64_t now_ns) const; /* with mutex_ held */
+	std::int64_t nextEventNs(std::int64_t now_ns) const; /* with mutex_ held */
 	/* Strobe::set and record it; force: call even when the line is believed there. */
-	void drive(bool on, bool force);			/* with mutex_ held */
+	void drive(bool on, bool force); /* with mutex_ held */
 
 	Strobe *strobe_;
-	std::int64_t stall_timeout_ns_;	/* <= 0: no dead-man switch */
+	std::int64_t stall_timeout_ns_; /* <= 0: no dead-man switch */
 
 	mutable std::mutex mutex_;
 	std::condition_variable wake_;
@@ -141,7 +141,7 @@ private:
 	bool constant_on_ = false;
 	bool line_on_ = false;
 	bool line_known_ = false;
-	std::int64_t retry_ns_ = 0;	/* after a failed set, no new attempt before this */
+	std::int64_t retry_ns_ = 0; /* after a failed set, no new attempt before this */
 	std::array<Pulse, kMaxPulses> pulses_{};
 	int pulse_count_ = 0;
 	std::array<Switch, kHistory> history_{};

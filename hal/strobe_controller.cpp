@@ -18,16 +18,16 @@
  * Strobe::set allocates its own error message; it is copied into a fixed
  * buffer here).
  */
-#include "hal/strobe.h"
+#include <pthread.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <limits>
-#include <pthread.h>
 #include <system_error>
 
 #include "hal/clock.h"
+#include "hal/strobe.h"
 
 namespace dockpose::hal {
 
@@ -48,7 +48,8 @@ std::chrono::steady_clock::time_point steadyTime(std::int64_t monotonic_ns)
 } /* namespace */
 
 StrobeController::StrobeController(Strobe *strobe, int stall_timeout_ms)
-	: strobe_(strobe), stall_timeout_ns_(static_cast<std::int64_t>(stall_timeout_ms) * 1000000)
+	: strobe_(strobe),
+	  stall_timeout_ns_(static_cast<std::int64_t>(stall_timeout_ms) * 1000000)
 {
 }
 
@@ -82,7 +83,8 @@ Status StrobeController::start()
 		thread_ = std::thread(&StrobeController::run, this);
 	} catch (const std::system_error &e) {
 		running_ = false;
-		return Status::error(std::string("strobe controller: cannot start the thread: ") + e.what());
+		return Status::error(std::string("strobe controller: cannot start the thread: ") +
+				     e.what());
 	}
 	pthread_setname_np(thread_.native_handle(), "strobe");
 	return Status::ok();

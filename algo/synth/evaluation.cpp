@@ -1,6 +1,5 @@
 /* SPDX-License-Identifier: MIT */
 #include "algo/synth/evaluation.h"
-#include "algo/synth/rng.h"
 
 #include <algorithm>
 #include <bit>
@@ -8,13 +7,14 @@
 #include <random>
 #include <vector>
 
+#include "algo/synth/rng.h"
+
 namespace dockpose {
 
 namespace {
 
 using synth::Rng;
 using synth::splitmix64;
-
 
 struct ScenarioInfo {
 	Scenario scenario;
@@ -347,9 +347,10 @@ EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &came
 	double mix_total = 0.0;
 	for (int s = 1; s < kScenarioCount; ++s) {
 		const auto scenario = static_cast<Scenario>(s);
-		mix_weight[s] = scenario == Scenario::TargetFree ? std::max(0.0, config.mix_target_free_weight)
+		mix_weight[s] = scenario == Scenario::TargetFree
+					? std::max(0.0, config.mix_target_free_weight)
 				: scenario == Scenario::Scrambled ? 0.0
-								   : 1.0;
+								  : 1.0;
 		mix_total += mix_weight[s];
 	}
 

@@ -42,7 +42,6 @@
  * when *out has the wrong size.
  */
 #include "algo/synth/renderer.h"
-#include "algo/synth/rng.h"
 
 #include <algorithm>
 #include <array>
@@ -52,6 +51,8 @@
 #include <random>
 
 #include <Eigen/Geometry>
+
+#include "algo/synth/rng.h"
 
 namespace dockpose {
 
@@ -454,7 +455,8 @@ void FrameRenderer::render(const Pose &pose, const RenderOptions &options, std::
 		led_mm[i] = target_.points_mm[i];
 		if (!scrambled)
 			continue;
-		Eigen::Vector3d dir(rng_scramble.normal(), rng_scramble.normal(), rng_scramble.normal());
+		Eigen::Vector3d dir(rng_scramble.normal(), rng_scramble.normal(),
+				    rng_scramble.normal());
 		if (dir.norm() < 1e-9)
 			dir = Eigen::Vector3d::UnitX();
 		led_mm[i] += dir.normalized() * rng_scramble.uniform(0.5, 1.0) * scramble_mm;

@@ -186,7 +186,8 @@ struct RenderTruth {
 	double motion_blur_angle_deg = 0.0; /* the streak's direction, when blurred */
 	int sun_patches = 0; /* sunlit patches drawn */
 	bool target_drawn = true; /* false on a target-free frame */
-	bool scrambled = false; /* the LEDs were drawn displaced (RenderOptions::scramble): no true pose */
+	bool scrambled =
+		false; /* the LEDs were drawn displaced (RenderOptions::scramble): no true pose */
 };
 
 class FrameRenderer

@@ -22,8 +22,10 @@ constexpr const char *kCans[] = { "socketcan" };
 
 hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 {
-	auto strobe = std::make_unique<hal::GpiodStrobe>(config.strobe.chip, config.strobe.line, config.strobe.active_low);
-	out->strobe_control = std::make_unique<hal::StrobeController>(strobe.get(), config.camera.stall_timeout_ms);
+	auto strobe = std::make_unique<hal::GpiodStrobe>(config.strobe.chip, config.strobe.line,
+							 config.strobe.active_low);
+	out->strobe_control = std::make_unique<hal::StrobeController>(
+		strobe.get(), config.camera.stall_timeout_ms);
 	out->strobe = std::move(strobe);
 	out->camera = std::make_unique<hal::LibcameraCamera>();
 	out->can = std::make_unique<hal::SocketCanBus>(config.can.interface, config.can.bitrate);
@@ -33,8 +35,13 @@ hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 } /* namespace */
 
 extern const BoardInfo kRpi5Imx296Board;
-const BoardInfo kRpi5Imx296Board{ "rpi5-imx296",
-				  "Raspberry Pi 5 + IMX296 global-shutter camera, GPIO LED strobe, MCP2518FD can0",
-				  wire, kCameras, kStrobes, kCans };
+const BoardInfo kRpi5Imx296Board{
+	"rpi5-imx296",
+	"Raspberry Pi 5 + IMX296 global-shutter camera, GPIO LED strobe, MCP2518FD can0",
+	wire,
+	kCameras,
+	kStrobes,
+	kCans
+};
 
 } /* namespace dockpose::board */

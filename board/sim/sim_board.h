@@ -15,6 +15,7 @@ namespace dockpose::board {
  * candump-log bus; tests use the loopback bus): a RecordingStrobe with its controller, and the
  * synthetic or replay camera of camera.backend. Allocates: the backends.
  */
-hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<hal::CanBus> can, Backends *out);
+hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<hal::CanBus> can,
+			  Backends *out);
 
 } /* namespace dockpose::board */

@@ -45,17 +45,20 @@ hal::SyntheticScene syntheticScene(const firmware::SyntheticCameraConfig &s)
 hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 {
 	if (config.can.log_file.empty())
-		return hal::Status::error("can.log_file: the sim board writes CAN frames to a candump log; "
-					  "name one in the board file or with --can-log FILE");
+		return hal::Status::error(
+			"can.log_file: the sim board writes CAN frames to a candump log; "
+			"name one in the board file or with --can-log FILE");
 	return wireSimulated(config, std::make_unique<hal::FileCanBus>(config.can.log_file), out);
 }
 
 } /* namespace */
 
-hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<hal::CanBus> can, Backends *out)
+hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<hal::CanBus> can,
+			  Backends *out)
 {
 	auto strobe = std::make_unique<hal::RecordingStrobe>();
-	out->strobe_control = std::make_unique<hal::StrobeController>(strobe.get(), config.camera.stall_timeout_ms);
+	out->strobe_control = std::make_unique<hal::StrobeController>(
+		strobe.get(), config.camera.stall_timeout_ms);
 	out->strobe = std::move(strobe);
 
 	if (config.camera.backend == "synthetic") {
@@ -66,19 +69,25 @@ hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<h
 		if (!intrinsics.ok())
 			return hal::Status::error(intrinsics.error);
 		const hal::SyntheticScene scene = syntheticScene(config.camera.synthetic);
-		out->camera = std::make_unique<hal::SyntheticCamera>(target.value, intrinsics.value, scene,
-								     out->strobe_control.get());
+		out->camera = std::make_unique<hal::SyntheticCamera>(
+			target.value, intrinsics.value, scene, out->strobe_control.get());
 	} else {
-		out->camera = std::make_unique<hal::ReplayCamera>(config.camera.replay.folder, config.camera.replay.loop);
+		out->camera = std::make_unique<hal::ReplayCamera>(config.camera.replay.folder,
+								  config.camera.replay.loop);
 	}
 
 	out->can = std::move(can);
 	return hal::Status::ok();
 }
 
-
 extern const BoardInfo kSimBoard;
-const BoardInfo kSimBoard{ "sim", "host simulation: synthetic or replayed frames, recording strobe, candump-log CAN",
-			   wire, kCameras, kStrobes, kCans };
+const BoardInfo kSimBoard{
+	"sim",
+	"host simulation: synthetic or replayed frames, recording strobe, candump-log CAN",
+	wire,
+	kCameras,
+	kStrobes,
+	kCans
+};
 
 } /* namespace dockpose::board */

@@ -24,11 +24,14 @@ constexpr const char *kCans[] = { "socketcan" };
 
 hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 {
-	auto strobe = std::make_unique<hal::GpiodStrobe>(config.strobe.chip, config.strobe.line, config.strobe.active_low);
-	out->strobe_control = std::make_unique<hal::StrobeController>(strobe.get(), config.camera.stall_timeout_ms);
+	auto strobe = std::make_unique<hal::GpiodStrobe>(config.strobe.chip, config.strobe.line,
+							 config.strobe.active_low);
+	out->strobe_control = std::make_unique<hal::StrobeController>(
+		strobe.get(), config.camera.stall_timeout_ms);
 	out->strobe = std::move(strobe);
 	if (config.camera.backend == "replay")
-		out->camera = std::make_unique<hal::ReplayCamera>(config.camera.replay.folder, config.camera.replay.loop);
+		out->camera = std::make_unique<hal::ReplayCamera>(config.camera.replay.folder,
+								  config.camera.replay.loop);
 	else
 		out->camera = std::make_unique<hal::LibcameraCamera>();
 	out->can = std::make_unique<hal::SocketCanBus>(config.can.interface, config.can.bitrate);
@@ -38,7 +41,10 @@ hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 } /* namespace */
 
 extern const BoardInfo kVmBoard;
-const BoardInfo kVmBoard{ "vm", "QEMU test board: libcamera on vimc (or replayed frames), gpio-sim strobe, vcan0",
-			  wire, kCameras, kStrobes, kCans };
+const BoardInfo kVmBoard{
+	"vm",	  "QEMU test board: libcamera on vimc (or replayed frames), gpio-sim strobe, vcan0",
+	wire,	  kCameras,
+	kStrobes, kCans
+};
 
 } /* namespace dockpose::board */

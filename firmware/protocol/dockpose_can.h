@@ -53,7 +53,7 @@ enum Offset : std::uint32_t {
 	kSigma = 0x4,
 	kStatus = 0x5,
 	kHeartbeat = 0x6,
-	kQuality = 0x7,		/* a pose frame, sent before the status */
+	kQuality = 0x7, /* a pose frame, sent before the status */
 	kCommand = 0x10,
 };
 
@@ -87,21 +87,42 @@ namespace layout {
 constexpr SignalLayout kLog10Nfa{ kQuality, 0, 16, true, 0.1 };
 } /* namespace layout */
 
-enum class SensorState : std::uint8_t { Startup = 0, Searching, Tracking, Degraded, Fault, Shutdown };
-enum class StrobeMode : std::uint8_t { Off = 0, Constant = 1, Alternate = 2, Unchanged = 3 };
-enum class TrackMode : std::uint8_t { Track = 0, SearchOnly = 1 };
+enum class SensorState : std::uint8_t {
+	Startup = 0,
+	Searching,
+	Tracking,
+	Degraded,
+	Fault,
+	Shutdown
+};
+enum class StrobeMode : std::uint8_t {
+	Off = 0,
+	Constant = 1,
+	Alternate = 2,
+	Unchanged = 3
+};
+enum class TrackMode : std::uint8_t {
+	Track = 0,
+	SearchOnly = 1
+};
 
 /* The names are the DBC's value-table names. A decoded value outside the
  * enumeration (State 6 or 7) is kept as it came and named "UNKNOWN". */
 inline const char *sensorStateName(SensorState state)
 {
 	switch (state) {
-	case SensorState::Startup: return "STARTUP";
-	case SensorState::Searching: return "SEARCHING";
-	case SensorState::Tracking: return "TRACKING";
-	case SensorState::Degraded: return "DEGRADED";
-	case SensorState::Fault: return "FAULT";
-	case SensorState::Shutdown: return "SHUTDOWN";
+	case SensorState::Startup:
+		return "STARTUP";
+	case SensorState::Searching:
+		return "SEARCHING";
+	case SensorState::Tracking:
+		return "TRACKING";
+	case SensorState::Degraded:
+		return "DEGRADED";
+	case SensorState::Fault:
+		return "FAULT";
+	case SensorState::Shutdown:
+		return "SHUTDOWN";
 	}
 	return "UNKNOWN";
 }
@@ -109,10 +130,14 @@ inline const char *sensorStateName(SensorState state)
 inline const char *strobeModeName(StrobeMode mode)
 {
 	switch (mode) {
-	case StrobeMode::Off: return "OFF";
-	case StrobeMode::Constant: return "CONSTANT";
-	case StrobeMode::Alternate: return "ALTERNATE";
-	case StrobeMode::Unchanged: return "UNCHANGED";
+	case StrobeMode::Off:
+		return "OFF";
+	case StrobeMode::Constant:
+		return "CONSTANT";
+	case StrobeMode::Alternate:
+		return "ALTERNATE";
+	case StrobeMode::Unchanged:
+		return "UNCHANGED";
 	}
 	return "UNKNOWN";
 }
@@ -120,8 +145,10 @@ inline const char *strobeModeName(StrobeMode mode)
 inline const char *trackModeName(TrackMode mode)
 {
 	switch (mode) {
-	case TrackMode::Track: return "TRACK";
-	case TrackMode::SearchOnly: return "SEARCH_ONLY";
+	case TrackMode::Track:
+		return "TRACK";
+	case TrackMode::SearchOnly:
+		return "SEARCH_ONLY";
 	}
 	return "UNKNOWN";
 }
@@ -141,8 +168,8 @@ constexpr std::uint8_t kCommandRejected = 1u << 7;
 inline const char *faultBitName(unsigned int bit)
 {
 	static constexpr const char *kNames[8] = {
-		"CAMERA_STALL", "CAMERA_ERROR", "STROBE_ERROR", "CAN_TX_OVERFLOW",
-		"CAN_BUS_OFF", "FRAMES_DROPPED", "LOOP_OVERRUN", "COMMAND_REJECTED",
+		"CAMERA_STALL", "CAMERA_ERROR",	  "STROBE_ERROR", "CAN_TX_OVERFLOW",
+		"CAN_BUS_OFF",	"FRAMES_DROPPED", "LOOP_OVERRUN", "COMMAND_REJECTED",
 	};
 	return bit < 8 ? kNames[bit] : "UNKNOWN";
 }
@@ -172,8 +199,15 @@ struct RawFrame {
 constexpr std::uint8_t frameCrc(std::uint32_t id, const std::array<std::uint8_t, 8> &data)
 {
 	std::uint8_t bytes[9] = {
-		static_cast<std::uint8_t>(id & 0xff), static_cast<std::uint8_t>((id >> 8) & 0x07),
-		data[0], data[1], data[2], data[3], data[4], data[5], data[6],
+		static_cast<std::uint8_t>(id & 0xff),
+		static_cast<std::uint8_t>((id >> 8) & 0x07),
+		data[0],
+		data[1],
+		data[2],
+		data[3],
+		data[4],
+		data[5],
+		data[6],
 	};
 	return crc8J1850(bytes, sizeof(bytes));
 }
@@ -197,12 +231,12 @@ constexpr double worstCaseBusLoad(double frames_hz, double heartbeat_hz, double 
 }
 
 struct PoseData {
-	std::uint32_t frame_counter = 0;	/* the camera frame's sequence number */
-	double t_mm[3]{};			/* X_c = R X_t + t; Tx, Ty: +-3276.7, Tz: 0..6553.5 */
-	double q[4]{ 1, 0, 0, 0 };		/* w x y z */
-	double rpy_deg[3]{};			/* roll, pan, tilt */
-	double sigma_t_mm[3]{};			/* 1-sigma, sent rounded up; >= 25.5 is sent as 25.5 (saturated) */
-	double sigma_rpy_deg[3]{};		/* 1-sigma, sent rounded up; >= 2.55 is sent as 2.55 (saturated) */
+	std::uint32_t frame_counter = 0; /* the camera frame's sequence number */
+	double t_mm[3]{}; /* X_c = R X_t + t; Tx, Ty: +-3276.7, Tz: 0..6553.5 */
+	double q[4]{ 1, 0, 0, 0 }; /* w x y z */
+	double rpy_deg[3]{}; /* roll, pan, tilt */
+	double sigma_t_mm[3]{}; /* 1-sigma, sent rounded up; >= 25.5 is sent as 25.5 (saturated) */
+	double sigma_rpy_deg[3]{}; /* 1-sigma, sent rounded up; >= 2.55 is sent as 2.55 (saturated) */
 	/* log10 of the match's number of false alarms (<= -4 when accepted, more
 	 * negative is more certain); resolution 0.1, saturates at -3276.8 and
 	 * 3276.7; NaN is sent as 3276.7 (unknown: no evidence). */
@@ -216,27 +250,27 @@ struct StatusData {
 	bool tracked = false;
 	StrobeMode strobe = StrobeMode::Off;
 	int leds_used = 0;
-	double rms_px = 0;			/* >= 2.55 is sent as 2.55 (saturated) */
-	std::uint8_t faults = 0;		/* fault:: bits */
-	double latency_ms = 0;			/* sensor timestamp to CAN send; >= 655.35 saturated */
+	double rms_px = 0; /* >= 2.55 is sent as 2.55 (saturated) */
+	std::uint8_t faults = 0; /* fault:: bits */
+	double latency_ms = 0; /* sensor timestamp to CAN send; >= 655.35 saturated */
 };
 
 struct HeartbeatData {
-	std::uint32_t uptime_s = 0;		/* saturates at 2^24 - 1 */
+	std::uint32_t uptime_s = 0; /* saturates at 2^24 - 1 */
 	SensorState state = SensorState::Startup;
 	TrackMode mode = TrackMode::Track;
 	StrobeMode strobe = StrobeMode::Off;
 	bool enabled = true;
 	std::uint8_t faults = 0;
-	double frame_rate_hz = 0;		/* resolution 0.5, up to 127.5 */
+	double frame_rate_hz = 0; /* resolution 0.5, up to 127.5 */
 };
 
 struct CommandData {
 	bool enable = true;
 	TrackMode mode = TrackMode::Track;
 	StrobeMode strobe = StrobeMode::Unchanged;
-	std::uint16_t exposure_us = 0;		/* 0: unchanged */
-	double gain = 0;			/* resolution 0.1, up to 25.5; 0: unchanged */
+	std::uint16_t exposure_us = 0; /* 0: unchanged */
+	double gain = 0; /* resolution 0.1, up to 25.5; 0: unchanged */
 };
 
 namespace detail {
@@ -264,7 +298,8 @@ inline std::int64_t clampRaw(double r, std::int64_t lo, std::int64_t hi)
 
 /* value / res rounded to the nearest integer and clamped to [lo, hi]; NaN
  * gives `nan_raw`. */
-inline std::int64_t toRaw(double value, double res, std::int64_t lo, std::int64_t hi, std::int64_t nan_raw)
+inline std::int64_t toRaw(double value, double res, std::int64_t lo, std::int64_t hi,
+			  std::int64_t nan_raw)
 {
 	if (std::isnan(value))
 		return nan_raw;
@@ -275,7 +310,8 @@ inline std::int64_t toRaw(double value, double res, std::int64_t lo, std::int64_
  * certainty than the estimate has (a sigma of 0.03 mm goes out as 0.1, not 0). The
  * 1e-9 step keeps an exact multiple (0.1 / 0.1) on its own step. NaN and a
  * negative value (no sigma at all) go out as nan_raw: unknown, never "certain". */
-inline std::int64_t toRawUp(double value, double res, std::int64_t lo, std::int64_t hi, std::int64_t nan_raw)
+inline std::int64_t toRawUp(double value, double res, std::int64_t lo, std::int64_t hi,
+			    std::int64_t nan_raw)
 {
 	if (!(value >= 0.0))
 		return nan_raw;
@@ -301,7 +337,8 @@ constexpr std::uint64_t signedField(std::int64_t raw, unsigned int start, unsign
 	return field(static_cast<std::uint64_t>(raw), start, length);
 }
 
-constexpr std::uint64_t bits(const std::array<std::uint8_t, 8> &data, unsigned int start, unsigned int length)
+constexpr std::uint64_t bits(const std::array<std::uint8_t, 8> &data, unsigned int start,
+			     unsigned int length)
 {
 	std::uint64_t word = 0;
 	for (int i = 7; i >= 0; --i)
@@ -310,7 +347,8 @@ constexpr std::uint64_t bits(const std::array<std::uint8_t, 8> &data, unsigned i
 }
 
 /* Sign-extended field of `length` bits. */
-constexpr std::int64_t signedBits(const std::array<std::uint8_t, 8> &data, unsigned int start, unsigned int length)
+constexpr std::int64_t signedBits(const std::array<std::uint8_t, 8> &data, unsigned int start,
+				  unsigned int length)
 {
 	const std::uint64_t raw = bits(data, start, length);
 	const std::uint64_t sign = std::uint64_t{ 1 } << (length - 1);
@@ -333,8 +371,9 @@ inline std::uint64_t put(const SignalLayout &s, double value, std::int64_t nan_r
 /* A scaled signal's value. */
 constexpr double get(const std::array<std::uint8_t, 8> &data, const SignalLayout &s)
 {
-	const std::int64_t raw = s.is_signed ? signedBits(data, s.start_bit, s.length_bits)
-					     : static_cast<std::int64_t>(bits(data, s.start_bit, s.length_bits));
+	const std::int64_t raw =
+		s.is_signed ? signedBits(data, s.start_bit, s.length_bits)
+			    : static_cast<std::int64_t>(bits(data, s.start_bit, s.length_bits));
 	return static_cast<double>(raw) * s.factor;
 }
 
@@ -359,7 +398,10 @@ class Encoder
 {
 public:
 	/* base_id must satisfy validBaseId(); identifiers are masked to 11 bits. */
-	explicit Encoder(std::uint32_t base_id = kDefaultBaseId) : base_id_(base_id) {}
+	explicit Encoder(std::uint32_t base_id = kDefaultBaseId)
+		: base_id_(base_id)
+	{
+	}
 
 	/*
 	 * One camera frame's report: the six pose frames (when status.pose_valid,
@@ -371,7 +413,8 @@ public:
 	 * out with PoseValid cleared and poseDropped() is true until the next
 	 * report. Other fields saturate at their ranges.
 	 */
-	int encodeReport(const StatusData &status, const PoseData *pose, RawFrame out[kReportFrames])
+	int encodeReport(const StatusData &status, const PoseData *pose,
+			 RawFrame out[kReportFrames])
 	{
 		using namespace detail;
 		const std::uint8_t seq = sequence_;
@@ -387,36 +430,60 @@ public:
 		int n = 0;
 		if (send_pose) {
 			const PoseData &p = *pose;
-			out[n++] = finish(kTranslation, seq,
-					  signedField(toRaw(p.t_mm[0], kTranslationRes, -32768, 32767, 0), 0, 16) |
-					  signedField(toRaw(p.t_mm[1], kTranslationRes, -32768, 32767, 0), 16, 16) |
-					  field(static_cast<std::uint64_t>(toRaw(p.t_mm[2], kTranslationRes, 0, 65535, 0)), 32, 16));
-			out[n++] = finish(kQuatA, seq,
-					  signedField(toRaw(p.q[0], kQuatRes, -32768, 32767, 0), 0, 16) |
-					  signedField(toRaw(p.q[1], kQuatRes, -32768, 32767, 0), 16, 16) |
-					  signedField(toRaw(p.q[2], kQuatRes, -32768, 32767, 0), 32, 16));
+			out[n++] = finish(
+				kTranslation, seq,
+				signedField(toRaw(p.t_mm[0], kTranslationRes, -32768, 32767, 0), 0,
+					    16) |
+					signedField(toRaw(p.t_mm[1], kTranslationRes, -32768, 32767,
+							  0),
+						    16, 16) |
+					field(static_cast<std::uint64_t>(toRaw(
+						      p.t_mm[2], kTranslationRes, 0, 65535, 0)),
+					      32, 16));
+			out[n++] = finish(
+				kQuatA, seq,
+				signedField(toRaw(p.q[0], kQuatRes, -32768, 32767, 0), 0, 16) |
+					signedField(toRaw(p.q[1], kQuatRes, -32768, 32767, 0), 16,
+						    16) |
+					signedField(toRaw(p.q[2], kQuatRes, -32768, 32767, 0), 32,
+						    16));
 			out[n++] = finish(kQuatB, seq,
-					  signedField(toRaw(p.q[3], kQuatRes, -32768, 32767, 0), 0, 16) |
-					  field(p.frame_counter, 16, 32));
-			out[n++] = finish(kAngles, seq,
-					  signedField(toRaw(p.rpy_deg[0], kAngleRes, -32768, 32767, 0), 0, 16) |
-					  signedField(toRaw(p.rpy_deg[1], kAngleRes, -32768, 32767, 0), 16, 16) |
-					  signedField(toRaw(p.rpy_deg[2], kAngleRes, -32768, 32767, 0), 32, 16));
+					  signedField(toRaw(p.q[3], kQuatRes, -32768, 32767, 0), 0,
+						      16) |
+						  field(p.frame_counter, 16, 32));
+			out[n++] =
+				finish(kAngles, seq,
+				       signedField(toRaw(p.rpy_deg[0], kAngleRes, -32768, 32767, 0),
+						   0, 16) |
+					       signedField(toRaw(p.rpy_deg[1], kAngleRes, -32768,
+								 32767, 0),
+							   16, 16) |
+					       signedField(toRaw(p.rpy_deg[2], kAngleRes, -32768,
+								 32767, 0),
+							   32, 16));
 			std::uint64_t sigma = 0;
 			for (unsigned int i = 0; i < 3; ++i) {
-				sigma |= signedField(toRawUp(p.sigma_t_mm[i], kSigmaTRes, 0, 255, 255), 8 * i, 8);
-				sigma |= signedField(toRawUp(p.sigma_rpy_deg[i], kSigmaRpyRes, 0, 255, 255), 24 + 8 * i, 8);
+				sigma |= signedField(toRawUp(p.sigma_t_mm[i], kSigmaTRes, 0, 255,
+							     255),
+						     8 * i, 8);
+				sigma |= signedField(toRawUp(p.sigma_rpy_deg[i], kSigmaRpyRes, 0,
+							     255, 255),
+						     24 + 8 * i, 8);
 			}
 			out[n++] = finish(kSigma, seq, sigma);
 			out[n++] = finish(kQuality, seq,
-					  put(layout::kLog10Nfa, p.log10_nfa, layout::kLog10Nfa.rawMax()));
+					  put(layout::kLog10Nfa, p.log10_nfa,
+					      layout::kLog10Nfa.rawMax()));
 		}
 
 		const std::uint64_t st =
 			field(static_cast<std::uint64_t>(status.state), 0, 3) |
 			flag(status.enabled, 3) | flag(send_pose, 4) | flag(status.tracked, 5) |
 			field(static_cast<std::uint64_t>(status.strobe), 6, 2) |
-			signedField(status.leds_used < 0 ? 0 : (status.leds_used > 255 ? 255 : status.leds_used), 8, 8) |
+			signedField(status.leds_used < 0
+					    ? 0
+					    : (status.leds_used > 255 ? 255 : status.leds_used),
+				    8, 8) |
 			signedField(toRaw(status.rms_px, kRmsRes, 0, 255, 255), 16, 8) |
 			field(status.faults, 24, 8) |
 			signedField(toRaw(status.latency_ms, kLatencyRes, 0, 65535, 65535), 32, 16);
@@ -430,12 +497,12 @@ public:
 		const std::uint64_t uptime = hb.uptime_s > 0xffffffu ? 0xffffffu : hb.uptime_s;
 		return finish(kHeartbeat, 0,
 			      field(uptime, 0, 24) |
-			      field(static_cast<std::uint64_t>(hb.state), 24, 3) |
-			      field(static_cast<std::uint64_t>(hb.mode), 27, 1) |
-			      field(static_cast<std::uint64_t>(hb.strobe), 28, 2) |
-			      flag(hb.enabled, 30) |
-			      field(hb.faults, 32, 8) |
-			      signedField(toRaw(hb.frame_rate_hz, kFrameRateRes, 0, 255, 0), 40, 8));
+				      field(static_cast<std::uint64_t>(hb.state), 24, 3) |
+				      field(static_cast<std::uint64_t>(hb.mode), 27, 1) |
+				      field(static_cast<std::uint64_t>(hb.strobe), 28, 2) |
+				      flag(hb.enabled, 30) | field(hb.faults, 32, 8) |
+				      signedField(toRaw(hb.frame_rate_hz, kFrameRateRes, 0, 255, 0),
+						  40, 8));
 	}
 
 	/* For the controller side (and tests). */
@@ -444,10 +511,10 @@ public:
 		using namespace detail;
 		return finish(kCommand, 0,
 			      flag(cmd.enable, 0) |
-			      field(static_cast<std::uint64_t>(cmd.mode), 1, 1) |
-			      field(static_cast<std::uint64_t>(cmd.strobe), 2, 2) |
-			      field(cmd.exposure_us, 8, 16) |
-			      signedField(toRaw(cmd.gain, kGainRes, 0, 255, 0), 24, 8));
+				      field(static_cast<std::uint64_t>(cmd.mode), 1, 1) |
+				      field(static_cast<std::uint64_t>(cmd.strobe), 2, 2) |
+				      field(cmd.exposure_us, 8, 16) |
+				      signedField(toRaw(cmd.gain, kGainRes, 0, 255, 0), 24, 8));
 	}
 
 	std::uint32_t baseId() const { return base_id_; }
@@ -500,17 +567,22 @@ enum class FrameError : std::uint8_t {
 	UnknownId,
 	WrongLength,
 	BadCrc,
-	StaleAlive,	/* repeated alive counter */
+	StaleAlive, /* repeated alive counter */
 };
 
 inline const char *frameErrorName(FrameError error)
 {
 	switch (error) {
-	case FrameError::None: return "none";
-	case FrameError::UnknownId: return "unknown id";
-	case FrameError::WrongLength: return "wrong length";
-	case FrameError::BadCrc: return "bad CRC";
-	case FrameError::StaleAlive: return "stale alive counter";
+	case FrameError::None:
+		return "none";
+	case FrameError::UnknownId:
+		return "unknown id";
+	case FrameError::WrongLength:
+		return "wrong length";
+	case FrameError::BadCrc:
+		return "bad CRC";
+	case FrameError::StaleAlive:
+		return "stale alive counter";
 	}
 	return "unknown error";
 }
@@ -537,7 +609,7 @@ class Decoder
 {
 public:
 	enum class Event : std::uint8_t {
-		None,		/* frame taken (or not ours), nothing completed */
+		None, /* frame taken (or not ours), nothing completed */
 		Report,
 		Heartbeat,
 		Command,
@@ -545,18 +617,21 @@ public:
 	};
 
 	struct Counters {
-		std::uint64_t frames = 0;		/* every frame fed */
+		std::uint64_t frames = 0; /* every frame fed */
 		std::uint64_t reports = 0;
 		std::uint64_t valid_poses = 0;
 		std::uint64_t incomplete_poses = 0;
 		std::uint64_t crc_errors = 0;
 		std::uint64_t length_errors = 0;
 		std::uint64_t unknown_ids = 0;
-		std::uint64_t alive_gaps = 0;		/* skipped counters: frames lost */
+		std::uint64_t alive_gaps = 0; /* skipped counters: frames lost */
 		std::uint64_t stale_frames = 0;
 	};
 
-	explicit Decoder(std::uint32_t base_id = kDefaultBaseId) : base_id_(base_id) {}
+	explicit Decoder(std::uint32_t base_id = kDefaultBaseId)
+		: base_id_(base_id)
+	{
+	}
 
 	Event feed(const RawFrame &frame)
 	{
@@ -601,14 +676,17 @@ public:
 		switch (offset) {
 		case kTranslation:
 			takePose(kTranslation, seq);
-			pending_.t_mm[0] = static_cast<double>(signedBits(d, 0, 16)) * kTranslationRes;
-			pending_.t_mm[1] = static_cast<double>(signedBits(d, 16, 16)) * kTranslationRes;
+			pending_.t_mm[0] =
+				static_cast<double>(signedBits(d, 0, 16)) * kTranslationRes;
+			pending_.t_mm[1] =
+				static_cast<double>(signedBits(d, 16, 16)) * kTranslationRes;
 			pending_.t_mm[2] = static_cast<double>(bits(d, 32, 16)) * kTranslationRes;
 			return Event::None;
 		case kQuatA:
 			takePose(kQuatA, seq);
 			for (unsigned int i = 0; i < 3; ++i)
-				pending_.q[i] = static_cast<double>(signedBits(d, 16 * i, 16)) * kQuatRes;
+				pending_.q[i] =
+					static_cast<double>(signedBits(d, 16 * i, 16)) * kQuatRes;
 			return Event::None;
 		case kQuatB:
 			takePose(kQuatB, seq);
@@ -618,13 +696,16 @@ public:
 		case kAngles:
 			takePose(kAngles, seq);
 			for (unsigned int i = 0; i < 3; ++i)
-				pending_.rpy_deg[i] = static_cast<double>(signedBits(d, 16 * i, 16)) * kAngleRes;
+				pending_.rpy_deg[i] =
+					static_cast<double>(signedBits(d, 16 * i, 16)) * kAngleRes;
 			return Event::None;
 		case kSigma:
 			takePose(kSigma, seq);
 			for (unsigned int i = 0; i < 3; ++i) {
-				pending_.sigma_t_mm[i] = static_cast<double>(bits(d, 8 * i, 8)) * kSigmaTRes;
-				pending_.sigma_rpy_deg[i] = static_cast<double>(bits(d, 24 + 8 * i, 8)) * kSigmaRpyRes;
+				pending_.sigma_t_mm[i] =
+					static_cast<double>(bits(d, 8 * i, 8)) * kSigmaTRes;
+				pending_.sigma_rpy_deg[i] =
+					static_cast<double>(bits(d, 24 + 8 * i, 8)) * kSigmaRpyRes;
 			}
 			return Event::None;
 		case kQuality:
@@ -640,7 +721,8 @@ public:
 			heartbeat_.strobe = static_cast<StrobeMode>(bits(d, 28, 2));
 			heartbeat_.enabled = bits(d, 30, 1) != 0;
 			heartbeat_.faults = static_cast<std::uint8_t>(bits(d, 32, 8));
-			heartbeat_.frame_rate_hz = static_cast<double>(bits(d, 40, 8)) * kFrameRateRes;
+			heartbeat_.frame_rate_hz =
+				static_cast<double>(bits(d, 40, 8)) * kFrameRateRes;
 			return Event::Heartbeat;
 		default: /* kCommand */
 			command_.enable = bits(d, 0, 1) != 0;
@@ -692,7 +774,8 @@ private:
 		status_.latency_ms = static_cast<double>(bits(d, 32, 16)) * kLatencyRes;
 		sequence_ = seq;
 
-		pose_valid_ = status_.pose_valid && pending_mask_ == kPoseFrameMask && pending_seq_ == seq;
+		pose_valid_ = status_.pose_valid && pending_mask_ == kPoseFrameMask &&
+			      pending_seq_ == seq;
 		if (pose_valid_) {
 			pose_ = pending_;
 			++counters_.valid_poses;
@@ -708,7 +791,7 @@ private:
 	std::array<std::uint8_t, detail::kSlots> alive_{};
 	std::array<bool, detail::kSlots> alive_seen_{};
 	PoseData pending_;
-	std::uint8_t pending_mask_ = 0;		/* bit per pose offset held */
+	std::uint8_t pending_mask_ = 0; /* bit per pose offset held */
 	std::uint8_t pending_seq_ = 0;
 	StatusData status_;
 	PoseData pose_;

@@ -4,16 +4,16 @@
  */
 #include "hal/gpiod/gpiod_strobe.h"
 
+#include <gpiod.h>
+#include <sched.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <sched.h>
 #include <utility>
 #include <vector>
-
-#include <gpiod.h>
 
 #ifndef DOCKPOSE_GPIOD_MAJOR
 #error "DOCKPOSE_GPIOD_MAJOR must be set (hal/CMakeLists.txt reads it from pkg-config)"
@@ -26,8 +26,8 @@ namespace {
 constexpr const char *kDevDir = "/dev";
 
 struct ChipInfo {
-	std::string name;	/* kernel name, "gpiochip0" */
-	std::string label;	/* "pinctrl-rp1" */
+	std::string name; /* kernel name, "gpiochip0" */
+	std::string label; /* "pinctrl-rp1" */
 	unsigned int num_lines = 0;
 };
 
@@ -59,12 +59,13 @@ std::string chipText(const ChipInfo &info)
 struct ScannedChip {
 	std::string path;
 	ChipInfo info;
-	int error = 0;		/* errno from opening it, 0 when info is valid */
+	int error = 0; /* errno from opening it, 0 when info is valid */
 };
 
 bool isNumber(const std::string &s)
 {
-	return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+	return !s.empty() &&
+	       std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
 }
 
 /* Every /dev/gpiochip<N>, in the order of N. */
@@ -147,7 +148,8 @@ gpiod_chip *openChip(const std::string &arg, std::string *error)
 			return c.error == 0 && (c.info.label == arg || c.info.name == arg);
 		});
 		if (it == chips.end()) {
-			*error = "gpio: no GPIO chip named or labelled \"" + arg + "\"" + foundText(chips);
+			*error = "gpio: no GPIO chip named or labelled \"" + arg + "\"" +
+				 foundText(chips);
 			return nullptr;
 		}
 		path = it->path;
@@ -163,7 +165,8 @@ gpiod_chip *openChip(const std::string &arg, std::string *error)
 		if (is_path)
 			*error = "gpio: no GPIO chip at " + path + foundText(scanChips());
 		else
-			*error = "gpio: no GPIO chip named or labelled \"" + arg + "\"" + foundText(scanChips());
+			*error = "gpio: no GPIO chip named or labelled \"" + arg + "\"" +
+				 foundText(scanChips());
 		break;
 	case EACCES:
 	case EPERM:
@@ -173,7 +176,8 @@ gpiod_chip *openChip(const std::string &arg, std::string *error)
 	case ENODEV:
 	case EISDIR:
 	case EINVAL:
-		*error = "gpio: " + path + " is not a GPIO character device" + foundText(scanChips());
+		*error = "gpio: " + path + " is not a GPIO character device" +
+			 foundText(scanChips());
 		break;
 	default:
 		*error = "gpio: cannot open " + path + ": " + std::strerror(err);
@@ -210,7 +214,8 @@ int setLine(void *handle, unsigned int offset, bool on)
 {
 #if DOCKPOSE_GPIOD_MAJOR >= 2
 	return gpiod_line_request_set_value(static_cast<gpiod_line_request *>(handle), offset,
-					    on ? GPIOD_LINE_VALUE_ACTIVE : GPIOD_LINE_VALUE_INACTIVE);
+					    on ? GPIOD_LINE_VALUE_ACTIVE
+					       : GPIOD_LINE_VALUE_INACTIVE);
 #else
 	(void)offset;
 	return gpiod_line_set_value(static_cast<gpiod_line *>(handle), on ? 1 : 0);
@@ -222,7 +227,8 @@ int setLine(void *handle, unsigned int offset, bool on)
  * for setLine (struct gpiod_line in v1, struct gpiod_line_request in v2), or
  * nullptr with errno set.
  */
-void *requestLine(gpiod_chip *chip, unsigned int offset, bool active_low, const std::string &consumer)
+void *requestLine(gpiod_chip *chip, unsigned int offset, bool active_low,
+		  const std::string &consumer)
 {
 #if DOCKPOSE_GPIOD_MAJOR >= 2
 	gpiod_line_settings *settings = gpiod_line_settings_new();
@@ -232,11 +238,14 @@ void *requestLine(gpiod_chip *chip, unsigned int offset, bool active_low, const 
 	int err = ENOMEM;
 	if (settings && line_config && request_config) {
 		if (gpiod_line_settings_set_direction(settings, GPIOD_LINE_DIRECTION_OUTPUT) == 0 &&
-		    gpiod_line_settings_set_output_value(settings, GPIOD_LINE_VALUE_INACTIVE) == 0) {
+		    gpiod_line_settings_set_output_value(settings, GPIOD_LINE_VALUE_INACTIVE) ==
+			    0) {
 			gpiod_line_settings_set_active_low(settings, active_low);
-			if (gpiod_line_config_add_line_settings(line_config, &offset, 1, settings) == 0) {
+			if (gpiod_line_config_add_line_settings(line_config, &offset, 1,
+								settings) == 0) {
 				gpiod_request_config_set_consumer(request_config, consumer.c_str());
-				request = gpiod_chip_request_lines(chip, request_config, line_config);
+				request =
+					gpiod_chip_request_lines(chip, request_config, line_config);
 			}
 		}
 		err = errno;
@@ -275,7 +284,10 @@ void releaseLine(void *handle)
 } /* namespace */
 
 GpiodStrobe::GpiodStrobe(std::string chip, int line, bool active_low, std::string consumer)
-	: chip_arg_(std::move(chip)), line_(line), active_low_(active_low), consumer_(std::move(consumer))
+	: chip_arg_(std::move(chip)),
+	  line_(line),
+	  active_low_(active_low),
+	  consumer_(std::move(consumer))
 {
 }
 
@@ -333,12 +345,16 @@ Status GpiodStrobe::open()
 		if (err == EBUSY) {
 			std::string consumer = consumerOf(chip, offset);
 			message = "gpio: " + where + " is busy (used by " +
-				  (consumer.empty() ? std::string("an unnamed consumer or the kernel")
-						    : "\"" + consumer + "\"") + ")";
+				  (consumer.empty()
+					   ? std::string("an unnamed consumer or the kernel")
+					   : "\"" + consumer + "\"") +
+				  ")";
 		} else if (err == EACCES || err == EPERM) {
-			message = "gpio: permission denied requesting " + where + " (/dev/" + info.name + ")";
+			message = "gpio: permission denied requesting " + where + " (/dev/" +
+				  info.name + ")";
 		} else {
-			message = "gpio: cannot request " + where + " as an output: " + std::strerror(err);
+			message = "gpio: cannot request " + where +
+				  " as an output: " + std::strerror(err);
 		}
 		gpiod_chip_close(chip);
 		return Status::error(message);

@@ -67,7 +67,7 @@ private:
 	int line_;
 	bool active_low_;
 	std::string consumer_;
-	std::string chip_text_;		/* "gpiochip0 [pinctrl-rp1]" once open */
+	std::string chip_text_; /* "gpiochip0 [pinctrl-rp1]" once open */
 
 	/* libgpiod objects: struct gpiod_chip, and struct gpiod_line (v1) or
 	 * struct gpiod_line_request (v2). handle_ is what forceOff uses. */

@@ -4,6 +4,11 @@
  */
 #include "hal/libcamera/libcamera_camera.h"
 
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -14,11 +19,6 @@
 #include <limits>
 #include <mutex>
 #include <utility>
-
-#include <poll.h>
-#include <sys/eventfd.h>
-#include <sys/mman.h>
-#include <unistd.h>
 
 #include <libcamera/camera.h>
 #include <libcamera/camera_manager.h>
@@ -43,7 +43,8 @@
 #endif
 
 /* libcamera 0.5 replaced AeEnable by ExposureTimeMode/AnalogueGainMode (AeEnable remains a wrapper). */
-#define DOCKPOSE_LIBCAMERA_HAS_EXPOSURE_MODES (DOCKPOSE_LIBCAMERA_MAJOR > 0 || DOCKPOSE_LIBCAMERA_MINOR >= 5)
+#define DOCKPOSE_LIBCAMERA_HAS_EXPOSURE_MODES                                                      \
+	(DOCKPOSE_LIBCAMERA_MAJOR > 0 || DOCKPOSE_LIBCAMERA_MINOR >= 5)
 
 namespace dockpose::hal {
 
@@ -66,24 +67,24 @@ struct FourccLayout {
 
 /* Formats with an 8-bit intensity plane first, by libcamera (DRM) fourcc. */
 constexpr std::array<FourccLayout, 18> kFourccLayouts{ {
-	{ fourcc('R', '8', ' ', ' '), PixelLayout::Gray8 },	/* R8 (V4L2 GREY) */
-	{ fourcc('Y', 'U', '1', '2'), PixelLayout::YUV420 },	/* YUV420 */
-	{ fourcc('Y', 'V', '1', '2'), PixelLayout::YUV420 },	/* YVU420: same Y plane */
-	{ fourcc('Y', 'U', '1', '6'), PixelLayout::YUV420 },	/* YUV422 planar: same Y plane */
+	{ fourcc('R', '8', ' ', ' '), PixelLayout::Gray8 }, /* R8 (V4L2 GREY) */
+	{ fourcc('Y', 'U', '1', '2'), PixelLayout::YUV420 }, /* YUV420 */
+	{ fourcc('Y', 'V', '1', '2'), PixelLayout::YUV420 }, /* YVU420: same Y plane */
+	{ fourcc('Y', 'U', '1', '6'), PixelLayout::YUV420 }, /* YUV422 planar: same Y plane */
 	{ fourcc('N', 'V', '1', '2'), PixelLayout::NV12 },
 	{ fourcc('N', 'V', '2', '1'), PixelLayout::NV21 },
-	{ fourcc('N', 'V', '1', '6'), PixelLayout::NV12 },	/* NV16: same Y plane */
-	{ fourcc('N', 'V', '6', '1'), PixelLayout::NV21 },	/* NV61: same Y plane */
+	{ fourcc('N', 'V', '1', '6'), PixelLayout::NV12 }, /* NV16: same Y plane */
+	{ fourcc('N', 'V', '6', '1'), PixelLayout::NV21 }, /* NV61: same Y plane */
 	{ fourcc('Y', 'U', 'Y', 'V'), PixelLayout::YUYV },
-	{ fourcc('Y', 'V', 'Y', 'U'), PixelLayout::YUYV },	/* YVYU: Y at even bytes too */
+	{ fourcc('Y', 'V', 'Y', 'U'), PixelLayout::YUYV }, /* YVYU: Y at even bytes too */
 	{ fourcc('U', 'Y', 'V', 'Y'), PixelLayout::UYVY },
-	{ fourcc('V', 'Y', 'U', 'Y'), PixelLayout::UYVY },	/* VYUY: Y at odd bytes too */
-	{ fourcc('R', 'G', '2', '4'), PixelLayout::RGB888 },	/* RGB888: bytes B, G, R */
-	{ fourcc('B', 'G', '2', '4'), PixelLayout::BGR888 },	/* BGR888: bytes R, G, B */
-	{ fourcc('X', 'R', '2', '4'), PixelLayout::XRGB8888 },	/* bytes B, G, R, X */
-	{ fourcc('A', 'R', '2', '4'), PixelLayout::XRGB8888 },	/* ARGB8888: bytes B, G, R, A */
-	{ fourcc('X', 'B', '2', '4'), PixelLayout::XBGR8888 },	/* bytes R, G, B, X */
-	{ fourcc('A', 'B', '2', '4'), PixelLayout::XBGR8888 },	/* ABGR8888: bytes R, G, B, A */
+	{ fourcc('V', 'Y', 'U', 'Y'), PixelLayout::UYVY }, /* VYUY: Y at odd bytes too */
+	{ fourcc('R', 'G', '2', '4'), PixelLayout::RGB888 }, /* RGB888: bytes B, G, R */
+	{ fourcc('B', 'G', '2', '4'), PixelLayout::BGR888 }, /* BGR888: bytes R, G, B */
+	{ fourcc('X', 'R', '2', '4'), PixelLayout::XRGB8888 }, /* bytes B, G, R, X */
+	{ fourcc('A', 'R', '2', '4'), PixelLayout::XRGB8888 }, /* ARGB8888: bytes B, G, R, A */
+	{ fourcc('X', 'B', '2', '4'), PixelLayout::XBGR8888 }, /* bytes R, G, B, X */
+	{ fourcc('A', 'B', '2', '4'), PixelLayout::XBGR8888 }, /* ABGR8888: bytes R, G, B, A */
 } };
 
 static_assert(fourcc('R', '8', ' ', ' ') == lc::formats::R8.fourcc());
@@ -105,8 +106,8 @@ static_assert(fourcc('A', 'R', '2', '4') == lc::formats::ARGB8888.fourcc());
 static_assert(fourcc('X', 'B', '2', '4') == lc::formats::XBGR8888.fourcc());
 static_assert(fourcc('A', 'B', '2', '4') == lc::formats::ABGR8888.fourcc());
 
-constexpr int kMaxRequests = 16;		/* FrameQueue capacity */
-constexpr std::size_t kMaxReadyFrames = 1;	/* completed frames waiting for the frame thread */
+constexpr int kMaxRequests = 16; /* FrameQueue capacity */
+constexpr std::size_t kMaxReadyFrames = 1; /* completed frames waiting for the frame thread */
 
 std::string joinIds(const std::vector<std::string> &ids)
 {
@@ -148,7 +149,8 @@ Status acquireManager(lc::CameraManager **out)
 		auto manager = std::make_unique<lc::CameraManager>();
 		const int ret = manager->start();
 		if (ret < 0)
-			return Status::error("libcamera: camera manager failed to start: " + errnoText(ret));
+			return Status::error("libcamera: camera manager failed to start: " +
+					     errnoText(ret));
 		s.manager = std::move(manager);
 	}
 	++s.users;
@@ -230,23 +232,26 @@ int pixelLayoutCost(PixelLayout layout)
 	return 4;
 }
 
-Status selectCamera(const std::vector<std::string> &ids, const std::string &id, int index, std::size_t *chosen)
+Status selectCamera(const std::vector<std::string> &ids, const std::string &id, int index,
+		    std::size_t *chosen)
 {
 	if (ids.empty())
-		return Status::error("libcamera: no cameras found (is the sensor connected and enabled, "
-				     "e.g. camera_auto_detect=1 / dtoverlay=imx296?)");
+		return Status::error(
+			"libcamera: no cameras found (is the sensor connected and enabled, "
+			"e.g. camera_auto_detect=1 / dtoverlay=imx296?)");
 	if (!id.empty()) {
 		const auto it = std::find(ids.begin(), ids.end(), id);
 		if (it == ids.end())
-			return Status::error("libcamera: no camera with id \"" + id + "\" (cameras: " + joinIds(ids) +
-					     ")");
+			return Status::error("libcamera: no camera with id \"" + id +
+					     "\" (cameras: " + joinIds(ids) + ")");
 		*chosen = static_cast<std::size_t>(it - ids.begin());
 		return Status::ok();
 	}
 	if (index < 0 || static_cast<std::size_t>(index) >= ids.size())
-		return Status::error("libcamera: camera index " + std::to_string(index) + " out of range (" +
-				     std::to_string(ids.size()) + (ids.size() == 1 ? " camera: " : " cameras: ") +
-				     joinIds(ids) + ")");
+		return Status::error("libcamera: camera index " + std::to_string(index) +
+				     " out of range (" + std::to_string(ids.size()) +
+				     (ids.size() == 1 ? " camera: " : " cameras: ") + joinIds(ids) +
+				     ")");
 	*chosen = static_cast<std::size_t>(index);
 	return Status::ok();
 }
@@ -254,24 +259,26 @@ Status selectCamera(const std::vector<std::string> &ids, const std::string &id, 
 Status checkCameraConfig(const CameraConfig &config)
 {
 	if (config.buffer_count < 2 || config.buffer_count > kMaxRequests)
-		return Status::error("libcamera: buffer_count " + std::to_string(config.buffer_count) +
-				     " out of range (2.." + std::to_string(kMaxRequests) + ")");
+		return Status::error("libcamera: buffer_count " +
+				     std::to_string(config.buffer_count) + " out of range (2.." +
+				     std::to_string(kMaxRequests) + ")");
 	if (config.width < 0 || config.height < 0 || (config.width == 0) != (config.height == 0))
 		return Status::error("libcamera: frame size " + std::to_string(config.width) + "x" +
 				     std::to_string(config.height) +
 				     " invalid (both > 0, or both 0 for the sensor's default)");
 	if (config.exposure_us <= 0)
-		return Status::error("libcamera: exposure_us " + std::to_string(config.exposure_us) +
-				     " must be > 0");
+		return Status::error("libcamera: exposure_us " +
+				     std::to_string(config.exposure_us) + " must be > 0");
 	if (!std::isfinite(config.analogue_gain) || config.analogue_gain < 1.0)
-		return Status::error("libcamera: analogue_gain " + std::to_string(config.analogue_gain) +
-				     " must be >= 1.0");
+		return Status::error("libcamera: analogue_gain " +
+				     std::to_string(config.analogue_gain) + " must be >= 1.0");
 	if (config.frame_duration_us < 0)
-		return Status::error("libcamera: frame_duration_us " + std::to_string(config.frame_duration_us) +
-				     " must be >= 0");
+		return Status::error("libcamera: frame_duration_us " +
+				     std::to_string(config.frame_duration_us) + " must be >= 0");
 	if (config.frame_duration_us > 0 && config.exposure_us > config.frame_duration_us)
-		return Status::error("libcamera: exposure_us " + std::to_string(config.exposure_us) +
-				     " exceeds frame_duration_us " + std::to_string(config.frame_duration_us));
+		return Status::error(
+			"libcamera: exposure_us " + std::to_string(config.exposure_us) +
+			" exceeds frame_duration_us " + std::to_string(config.frame_duration_us));
 	return Status::ok();
 }
 
@@ -300,13 +307,18 @@ public:
 	std::string lastError() const;
 
 	/* Slot (= request = buffer) states. */
-	enum : int { kIdle, kQueued, kReady, kHeld };
+	enum : int {
+		kIdle,
+		kQueued,
+		kReady,
+		kHeld
+	};
 
 	struct Slot {
 		std::unique_ptr<lc::Request> request;
 		lc::FrameBuffer *buffer = nullptr;
 		const std::uint8_t *plane = nullptr; /* first plane, mapped */
-		std::vector<std::uint8_t> intensity;  /* converted frame (non-zero-copy formats) */
+		std::vector<std::uint8_t> intensity; /* converted frame (non-zero-copy formats) */
 		std::atomic<int> state{ kIdle };
 	};
 
@@ -324,11 +336,12 @@ public:
 	void drainEventFd();
 	bool queueSlot(std::size_t index); /* requeue_mutex_ held, running_ */
 	void recycleFromCallback(std::int32_t index);
-	void requeueIdle();		     /* frame thread */
+	void requeueIdle(); /* frame thread */
 	void applyPendingControls(lc::Request *request);
 	bool fillFrame(std::size_t index, Frame *frame);
 	void drainQueue();
-	Status mapBuffers(const std::vector<std::unique_ptr<lc::FrameBuffer>> &buffers, std::size_t count);
+	Status mapBuffers(const std::vector<std::unique_ptr<lc::FrameBuffer>> &buffers,
+			  std::size_t count);
 
 	/* Configuration (control thread). */
 	lc::CameraManager *manager_ = nullptr;
@@ -365,7 +378,8 @@ public:
 	/* Shared between threads. */
 	int event_fd_ = -1;
 	FrameQueue<kMaxRequests> queue_;
-	std::mutex requeue_mutex_; /* orders queueRequest() against stop(); never waited on by libcamera's thread */
+	std::mutex
+		requeue_mutex_; /* orders queueRequest() against stop(); never waited on by libcamera's thread */
 	std::atomic<bool> running_{ false };
 	std::atomic<bool> disconnected_{ false };
 	std::atomic<bool> recycle_pending_{ false };
@@ -385,7 +399,8 @@ public:
 LibcameraCamera::Impl::Impl()
 {
 	event_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-	controls_packed_.store(packControls(camera_config_.exposure_us, static_cast<float>(camera_config_.analogue_gain)));
+	controls_packed_.store(packControls(camera_config_.exposure_us,
+					    static_cast<float>(camera_config_.analogue_gain)));
 }
 
 LibcameraCamera::Impl::~Impl()
@@ -427,8 +442,9 @@ void LibcameraCamera::Impl::drainEventFd()
 	}
 }
 
-Status LibcameraCamera::Impl::mapBuffers(const std::vector<std::unique_ptr<lc::FrameBuffer>> &buffers,
-					 std::size_t count)
+Status
+LibcameraCamera::Impl::mapBuffers(const std::vector<std::unique_ptr<lc::FrameBuffer>> &buffers,
+				  std::size_t count)
 {
 	for (std::size_t i = 0; i < count; ++i) {
 		const lc::FrameBuffer *buffer = buffers[i].get();
@@ -440,9 +456,11 @@ Status LibcameraCamera::Impl::mapBuffers(const std::vector<std::unique_ptr<lc::F
 		for (const auto &plane : planes) {
 			const int fd = plane.fd.get();
 			if (fd < 0)
-				return fail("libcamera: buffer " + std::to_string(i) + " has a plane without a dmabuf");
-			const bool mapped = std::any_of(mappings_.begin(), mappings_.end(),
-							[fd](const Mapping &m) { return m.fd == fd; });
+				return fail("libcamera: buffer " + std::to_string(i) +
+					    " has a plane without a dmabuf");
+			const bool mapped =
+				std::any_of(mappings_.begin(), mappings_.end(),
+					    [fd](const Mapping &m) { return m.fd == fd; });
 			if (mapped)
 				continue;
 			std::size_t length = 0;
@@ -453,32 +471,40 @@ Status LibcameraCamera::Impl::mapBuffers(const std::vector<std::unique_ptr<lc::F
 				for (const auto &p : planes)
 					if (p.fd.get() == fd)
 						length = std::max<std::size_t>(
-							length, static_cast<std::size_t>(
-									p.offset == lc::FrameBuffer::Plane::kInvalidOffset
-										? 0
-										: p.offset) +
-									p.length);
+							length,
+							static_cast<std::size_t>(
+								p.offset == lc::FrameBuffer::Plane::
+											kInvalidOffset
+									? 0
+									: p.offset) +
+								p.length);
 			}
 			void *address = ::mmap(nullptr, length, PROT_READ, MAP_SHARED, fd, 0);
 			if (address == MAP_FAILED)
-				return fail("libcamera: mmap of buffer " + std::to_string(i) + " (" +
-					    std::to_string(length) + " bytes) failed: " + errnoText(errno));
+				return fail("libcamera: mmap of buffer " + std::to_string(i) +
+					    " (" + std::to_string(length) +
+					    " bytes) failed: " + errnoText(errno));
 			mappings_.push_back(Mapping{ fd, address, length });
 		}
 
 		const auto &first = planes[0];
-		const auto mapping = std::find_if(mappings_.begin(), mappings_.end(),
-						  [&first](const Mapping &m) { return m.fd == first.fd.get(); });
-		const std::size_t offset = first.offset == lc::FrameBuffer::Plane::kInvalidOffset ? 0 : first.offset;
+		const auto mapping =
+			std::find_if(mappings_.begin(), mappings_.end(),
+				     [&first](const Mapping &m) { return m.fd == first.fd.get(); });
+		const std::size_t offset =
+			first.offset == lc::FrameBuffer::Plane::kInvalidOffset ? 0 : first.offset;
 		if (offset + first.length > mapping->length)
-			return fail("libcamera: plane 0 of buffer " + std::to_string(i) + " (offset " +
-				    std::to_string(offset) + ", " + std::to_string(first.length) +
-				    " bytes) lies outside its dmabuf (" + std::to_string(mapping->length) + " bytes)");
+			return fail("libcamera: plane 0 of buffer " + std::to_string(i) +
+				    " (offset " + std::to_string(offset) + ", " +
+				    std::to_string(first.length) +
+				    " bytes) lies outside its dmabuf (" +
+				    std::to_string(mapping->length) + " bytes)");
 		if (first.length < frame_bytes_)
-			return fail("libcamera: plane 0 of buffer " + std::to_string(i) + " holds " +
-				    std::to_string(first.length) + " bytes, a " + std::to_string(width_) + "x" +
-				    std::to_string(height_) + " " + format_name_ + " frame with stride " +
-				    std::to_string(stride_) + " needs " + std::to_string(frame_bytes_));
+			return fail("libcamera: plane 0 of buffer " + std::to_string(i) +
+				    " holds " + std::to_string(first.length) + " bytes, a " +
+				    std::to_string(width_) + "x" + std::to_string(height_) + " " +
+				    format_name_ + " frame with stride " + std::to_string(stride_) +
+				    " needs " + std::to_string(frame_bytes_));
 		slots_[i].plane = static_cast<const std::uint8_t *>(mapping->address) + offset;
 	}
 	return Status::ok();
@@ -524,7 +550,8 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	}
 	if (const int ret = camera_->acquire(); ret < 0) {
 		Status r = fail("libcamera: cannot acquire camera \"" + camera_id_ + "\"" +
-				(ret == -EBUSY ? " (in use by another process?)" : "") + ": " + errnoText(ret));
+				(ret == -EBUSY ? " (in use by another process?)" : "") + ": " +
+				errnoText(ret));
 		teardown(false);
 		return r;
 	}
@@ -534,14 +561,16 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	connected_ = true;
 
 	/* One processed stream, in the cheapest format with an 8-bit intensity plane. */
-	for (const lc::StreamRole role : { lc::StreamRole::VideoRecording, lc::StreamRole::Viewfinder }) {
+	for (const lc::StreamRole role :
+	     { lc::StreamRole::VideoRecording, lc::StreamRole::Viewfinder }) {
 		const std::vector<lc::StreamRole> roles{ role };
 		config_ = camera_->generateConfiguration(roles);
 		if (config_ && !config_->empty())
 			break;
 	}
 	if (!config_ || config_->empty()) {
-		Status r = fail("libcamera: camera \"" + camera_id_ + "\" offers no processed stream");
+		Status r =
+			fail("libcamera: camera \"" + camera_id_ + "\" offers no processed stream");
 		teardown(false);
 		return r;
 	}
@@ -555,7 +584,8 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 			continue;
 		const int cost = pixelLayoutCost(*layout);
 		/* Ties: the pipeline's own default first, else the order offered. */
-		if (cost < best_cost || (cost == best_cost && format == stream_config.pixelFormat)) {
+		if (cost < best_cost ||
+		    (cost == best_cost && format == stream_config.pixelFormat)) {
 			best = format;
 			best_cost = cost;
 		}
@@ -565,7 +595,8 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 		for (const auto &format : offered)
 			names += (names.empty() ? "" : ", ") + format.toString();
 		Status r = fail("libcamera: camera \"" + camera_id_ +
-				"\" offers no format with an 8-bit intensity plane (offers: " + names + ")");
+				"\" offers no format with an 8-bit intensity plane (offers: " +
+				names + ")");
 		teardown(false);
 		return r;
 	}
@@ -576,8 +607,8 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	stream_config.bufferCount = static_cast<unsigned int>(config.buffer_count);
 
 	if (config_->validate() == lc::CameraConfiguration::Invalid) {
-		Status r = fail("libcamera: camera \"" + camera_id_ + "\" rejects the configuration " +
-				stream_config.toString());
+		Status r = fail("libcamera: camera \"" + camera_id_ +
+				"\" rejects the configuration " + stream_config.toString());
 		teardown(false);
 		return r;
 	}
@@ -585,16 +616,20 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 						 stream_config.pixelFormat.modifier());
 	if (!layout) {
 		Status r = fail("libcamera: camera \"" + camera_id_ + "\" adjusted the format to " +
-				stream_config.pixelFormat.toString() + ", which has no 8-bit intensity plane");
+				stream_config.pixelFormat.toString() +
+				", which has no 8-bit intensity plane");
 		teardown(false);
 		return r;
 	}
-	if (config.width > 0 && (stream_config.size.width != static_cast<unsigned int>(config.width) ||
-				 stream_config.size.height != static_cast<unsigned int>(config.height))) {
-		Status r = fail("libcamera: camera \"" + camera_id_ + "\" cannot deliver " +
-				std::to_string(config.width) + "x" + std::to_string(config.height) + " " +
-				best->toString() + " (nearest " + stream_config.size.toString() +
-				"; sizes: " + sizesText(stream_config.formats(), stream_config.pixelFormat) + ")");
+	if (config.width > 0 &&
+	    (stream_config.size.width != static_cast<unsigned int>(config.width) ||
+	     stream_config.size.height != static_cast<unsigned int>(config.height))) {
+		Status r =
+			fail("libcamera: camera \"" + camera_id_ + "\" cannot deliver " +
+			     std::to_string(config.width) + "x" + std::to_string(config.height) +
+			     " " + best->toString() + " (nearest " + stream_config.size.toString() +
+			     "; sizes: " +
+			     sizesText(stream_config.formats(), stream_config.pixelFormat) + ")");
 		teardown(false);
 		return r;
 	}
@@ -612,8 +647,9 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	stride_ = static_cast<int>(stream_config.stride);
 	stream_ = stream_config.stream();
 	if (stride_ < minStrideBytes(layout_, width_)) {
-		Status r = fail("libcamera: stream stride " + std::to_string(stride_) + " is too small for " +
-				std::to_string(width_) + " " + format_name_ + " pixels");
+		Status r = fail("libcamera: stream stride " + std::to_string(stride_) +
+				" is too small for " + std::to_string(width_) + " " + format_name_ +
+				" pixels");
 		teardown(false);
 		return r;
 	}
@@ -624,7 +660,8 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	allocator_ = std::make_unique<lc::FrameBufferAllocator>(camera_);
 	const int allocated = allocator_->allocate(stream_);
 	if (allocated <= 0) {
-		Status r = fail("libcamera: allocating buffers for camera \"" + camera_id_ + "\" failed: " +
+		Status r = fail("libcamera: allocating buffers for camera \"" + camera_id_ +
+				"\" failed: " +
 				(allocated < 0 ? errnoText(allocated) : std::string("no buffers")));
 		teardown(false);
 		return r;
@@ -652,7 +689,9 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 			return r;
 		}
 		if (!isZeroCopy(layout_))
-			slot.intensity.assign(static_cast<std::size_t>(width_) * static_cast<std::size_t>(height_), 0);
+			slot.intensity.assign(static_cast<std::size_t>(width_) *
+						      static_cast<std::size_t>(height_),
+					      0);
 	}
 
 	/*
@@ -673,7 +712,8 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	has_gain_mode_ = lists(lc::controls::AnalogueGainMode);
 #endif
 
-	controls_packed_.store(packControls(config.exposure_us, static_cast<float>(config.analogue_gain)));
+	controls_packed_.store(
+		packControls(config.exposure_us, static_cast<float>(config.analogue_gain)));
 	frames_.store(0);
 	dropped_.store(0);
 	errors_.store(0);
@@ -710,13 +750,16 @@ Status LibcameraCamera::Impl::start()
 	if (has_gain_)
 		controls.set(lc::controls::AnalogueGain, gain);
 	if (has_frame_duration_ && camera_config_.frame_duration_us > 0) {
-		const std::int64_t limits[2] = { camera_config_.frame_duration_us, camera_config_.frame_duration_us };
-		controls.set(lc::controls::FrameDurationLimits, lc::Span<const std::int64_t, 2>(limits));
+		const std::int64_t limits[2] = { camera_config_.frame_duration_us,
+						 camera_config_.frame_duration_us };
+		controls.set(lc::controls::FrameDurationLimits,
+			     lc::Span<const std::int64_t, 2>(limits));
 	}
 	applied_generation_.store(controls_generation_.load());
 
 	if (const int ret = camera_->start(&controls); ret < 0)
-		return fail("libcamera: starting camera \"" + camera_id_ + "\" failed: " + errnoText(ret));
+		return fail("libcamera: starting camera \"" + camera_id_ +
+			    "\" failed: " + errnoText(ret));
 	started_ = true;
 
 	std::size_t queued = 0;
@@ -828,7 +871,8 @@ void LibcameraCamera::Impl::applyPendingControls(lc::Request *request)
 	/* Exactly one request carries each change, whichever thread queues first. */
 	if (!applied_generation_.compare_exchange_strong(applied, generation))
 		return;
-	const auto [exposure_us, gain] = unpackControls(controls_packed_.load(std::memory_order_acquire));
+	const auto [exposure_us, gain] =
+		unpackControls(controls_packed_.load(std::memory_order_acquire));
 	lc::ControlList &controls = request->controls();
 	if (has_exposure_)
 		controls.set(lc::controls::ExposureTime, exposure_us);
@@ -903,16 +947,20 @@ bool LibcameraCamera::Impl::fillFrame(std::size_t index, Frame *frame)
 	if (isZeroCopy(layout_)) {
 		frame->image = ImageView{ slot.plane, width_, height_, stride_ };
 	} else {
-		if (!toIntensity(slot.plane, width_, height_, stride_, layout_, slot.intensity.data(), width_))
+		if (!toIntensity(slot.plane, width_, height_, stride_, layout_,
+				 slot.intensity.data(), width_))
 			return false;
 		frame->image = ImageView{ slot.intensity.data(), width_, height_, width_ };
 	}
 
 	const lc::ControlList &result = slot.request->metadata();
-	const auto [requested_exposure_us, requested_gain] = unpackControls(controls_packed_.load());
-	const std::int32_t exposure_us = result.get(lc::controls::ExposureTime).value_or(requested_exposure_us);
+	const auto [requested_exposure_us, requested_gain] =
+		unpackControls(controls_packed_.load());
+	const std::int32_t exposure_us =
+		result.get(lc::controls::ExposureTime).value_or(requested_exposure_us);
 	const std::int64_t sensor_ns =
-		result.get(lc::controls::SensorTimestamp).value_or(static_cast<std::int64_t>(metadata.timestamp));
+		result.get(lc::controls::SensorTimestamp)
+			.value_or(static_cast<std::int64_t>(metadata.timestamp));
 	frame->sequence = metadata.sequence;
 	frame->timestamp_ns = exposureStartNs(sensor_ns, exposure_us);
 	frame->exposure_us = exposure_us;
@@ -928,7 +976,8 @@ WaitResult LibcameraCamera::Impl::waitFrame(Frame *frame, int timeout_ms)
 		return WaitResult::Error;
 	}
 	const std::int64_t deadline_ns =
-		timeout_ms < 0 ? 0 : monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
+		timeout_ms < 0 ? 0
+			       : monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
 	for (;;) {
 		if (disconnected_.load())
 			return WaitResult::Error;
@@ -986,10 +1035,13 @@ void LibcameraCamera::Impl::releaseFrame(const Frame &frame)
 Status LibcameraCamera::Impl::setControls(int exposure_us, double analogue_gain)
 {
 	if (exposure_us <= 0)
-		return Status::error("libcamera: exposure_us " + std::to_string(exposure_us) + " must be > 0");
+		return Status::error("libcamera: exposure_us " + std::to_string(exposure_us) +
+				     " must be > 0");
 	if (!std::isfinite(analogue_gain) || analogue_gain < 1.0)
-		return Status::error("libcamera: analogue_gain " + std::to_string(analogue_gain) + " must be >= 1.0");
-	controls_packed_.store(packControls(exposure_us, static_cast<float>(analogue_gain)), std::memory_order_release);
+		return Status::error("libcamera: analogue_gain " + std::to_string(analogue_gain) +
+				     " must be >= 1.0");
+	controls_packed_.store(packControls(exposure_us, static_cast<float>(analogue_gain)),
+			       std::memory_order_release);
 	controls_generation_.fetch_add(1, std::memory_order_acq_rel);
 	return Status::ok();
 }
@@ -997,13 +1049,17 @@ Status LibcameraCamera::Impl::setControls(int exposure_us, double analogue_gain)
 /* -------------------------------------------------------------------------- */
 /* LibcameraCamera */
 
-LibcameraCamera::LibcameraCamera() : impl_(std::make_unique<Impl>()) {}
+LibcameraCamera::LibcameraCamera()
+	: impl_(std::make_unique<Impl>())
+{
+}
 
 LibcameraCamera::~LibcameraCamera() = default;
 
 std::string LibcameraCamera::name() const
 {
-	return impl_->camera_id_.empty() ? std::string("libcamera") : "libcamera " + impl_->camera_id_;
+	return impl_->camera_id_.empty() ? std::string("libcamera")
+					 : "libcamera " + impl_->camera_id_;
 }
 
 Status LibcameraCamera::configure(const CameraConfig &config)

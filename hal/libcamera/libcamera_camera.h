@@ -158,7 +158,8 @@ int pixelLayoutCost(PixelLayout layout);
  *   libcamera: no camera with id "x" (cameras: a, b)
  *   libcamera: camera index 2 out of range (2 cameras: a, b)
  */
-Status selectCamera(const std::vector<std::string> &ids, const std::string &id, int index, std::size_t *chosen);
+Status selectCamera(const std::vector<std::string> &ids, const std::string &id, int index,
+		    std::size_t *chosen);
 
 /* Checks a CameraConfig before libcamera is touched (buffer_count 2..16,
  * exposure_us > 0 and <= frame_duration_us when that is > 0, gain >= 1, sizes >= 0). */
@@ -167,7 +168,8 @@ Status checkCameraConfig(const CameraConfig &config);
 /* Exposure start of the first row from a frame-start (readout) timestamp. */
 inline std::int64_t exposureStartNs(std::int64_t frame_start_ns, std::int32_t exposure_us)
 {
-	return exposure_us > 0 ? frame_start_ns - static_cast<std::int64_t>(exposure_us) * 1000 : frame_start_ns;
+	return exposure_us > 0 ? frame_start_ns - static_cast<std::int64_t>(exposure_us) * 1000
+			       : frame_start_ns;
 }
 
 } /* namespace dockpose::hal */

@@ -126,7 +126,7 @@ bool KernelSocketCanIo::open(const SocketCanOpenRequest &request, bool describe,
 	if (err == ENODEV) {
 		if (describe)
 			copyInto(error, socketcan::missingInterfaceMessage(request.interface,
-									     "/sys/class/net"));
+									   "/sys/class/net"));
 		else
 			formatInto(error, "can: no CAN interface \"%s\"", request.interface);
 		::close(s);
@@ -199,8 +199,8 @@ int KernelSocketCanIo::read(SocketCanRead *out)
 	iovec iov{};
 	iov.iov_base = &out->frame;
 	iov.iov_len = sizeof(out->frame);
-	alignas(cmsghdr) char control[CMSG_SPACE(sizeof(timespec)) +
-				      CMSG_SPACE(sizeof(std::uint32_t))];
+	alignas(cmsghdr) char
+		control[CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(std::uint32_t))];
 	msghdr msg{};
 	msg.msg_iov = &iov;
 	msg.msg_iovlen = 1;
@@ -251,7 +251,9 @@ SocketCanBus::SocketCanBus(std::string interface, int bitrate)
 }
 
 SocketCanBus::SocketCanBus(std::string interface, std::unique_ptr<SocketCanIo> io, int bitrate)
-	: interface_(std::move(interface)), bitrate_(bitrate), io_(std::move(io))
+	: interface_(std::move(interface)),
+	  bitrate_(bitrate),
+	  io_(std::move(io))
 {
 }
 
@@ -614,7 +616,7 @@ bool toCanFdFrame(const CanFrame &frame, canfd_frame *out)
 	out->can_id = kernelId(frame);
 	const std::uint8_t len = std::min<std::uint8_t>(frame.len, CANFD_MAX_DLEN);
 	out->len = canFdLength(len);
-	std::memcpy(out->data, frame.data.data(), len);	/* the padding stays zero */
+	std::memcpy(out->data, frame.data.data(), len); /* the padding stays zero */
 	return true;
 }
 
@@ -726,18 +728,22 @@ bool checkInterface(const char *name, const InterfaceInfo &info, bool fd, int bi
 			formatInto(error, "can: interface \"%s\" is down (ip link set %s up)", name,
 				   name);
 		else if (bitrate > 0)
-			formatInto(error, "can: interface \"%s\" is down "
-					  "(ip link set %s up type can bitrate %d)",
+			formatInto(error,
+				   "can: interface \"%s\" is down "
+				   "(ip link set %s up type can bitrate %d)",
 				   name, name, bitrate);
 		else
-			formatInto(error, "can: interface \"%s\" is down "
-					  "(ip link set %s up type can bitrate <bit/s>)",
+			formatInto(error,
+				   "can: interface \"%s\" is down "
+				   "(ip link set %s up type can bitrate <bit/s>)",
 				   name, name);
 		return false;
 	}
 	if (fd && info.mtu < static_cast<int>(CANFD_MTU)) {
-		formatInto(error, "can: interface \"%s\" does not support CAN FD (MTU %d, not %zu: "
-			   "ip link set %s type can ... fd on)", name, info.mtu, CANFD_MTU, name);
+		formatInto(error,
+			   "can: interface \"%s\" does not support CAN FD (MTU %d, not %zu: "
+			   "ip link set %s type can ... fd on)",
+			   name, info.mtu, CANFD_MTU, name);
 		return false;
 	}
 	return true;
@@ -751,8 +757,9 @@ void socketErrorMessage(int err, std::span<char> error)
 		formatInto(error, "can: this kernel has no SocketCAN support (socket(PF_CAN): %s)",
 			   text);
 	else if (err == EPROTONOSUPPORT)
-		formatInto(error, "can: this kernel has SocketCAN but no raw CAN sockets, "
-				  "CONFIG_CAN_RAW (socket(PF_CAN, CAN_RAW): %s)",
+		formatInto(error,
+			   "can: this kernel has SocketCAN but no raw CAN sockets, "
+			   "CONFIG_CAN_RAW (socket(PF_CAN, CAN_RAW): %s)",
 			   text);
 	else
 		formatInto(error, "can: socket(PF_CAN) failed: %s", text);
@@ -780,7 +787,7 @@ std::vector<std::string> listInterfaces(const std::string &sys_class_net, bool c
 		long index = 0;
 		std::ifstream type_file(it->path() / "type");
 		if (!(type_file >> type))
-			continue;	/* not an interface (bonding_masters, ...) */
+			continue; /* not an interface (bonding_masters, ...) */
 		std::ifstream index_file(it->path() / "ifindex");
 		index_file >> index;
 		if (can_only && type != ARPHRD_CAN)

@@ -97,18 +97,18 @@ namespace dockpose::hal {
 /* What SocketCanBus asks of the kernel: open() with these settings. */
 struct SocketCanOpenRequest {
 	const char *interface = "";
-	std::span<const can_filter> filters;	/* kernel filters (socketcan::toKernelFilter) */
-	bool fd = false;			/* CAN_RAW_FD_FRAMES */
-	int bitrate = 0;			/* bit/s, only for the hint when it is down */
+	std::span<const can_filter> filters; /* kernel filters (socketcan::toKernelFilter) */
+	bool fd = false; /* CAN_RAW_FD_FRAMES */
+	int bitrate = 0; /* bit/s, only for the hint when it is down */
 };
 
 /* One frame read from the socket. */
 struct SocketCanRead {
-	canfd_frame frame{};			/* size CAN_MTU: its start is a can_frame */
-	std::size_t size = 0;			/* bytes read: CAN_MTU or CANFD_MTU */
-	std::int64_t timestamp_ns = 0;		/* reception, CLOCK_MONOTONIC */
+	canfd_frame frame{}; /* size CAN_MTU: its start is a can_frame */
+	std::size_t size = 0; /* bytes read: CAN_MTU or CANFD_MTU */
+	std::int64_t timestamp_ns = 0; /* reception, CLOCK_MONOTONIC */
 	bool has_drop_count = false;
-	std::uint32_t drop_count = 0;		/* frames the socket lost, a running count */
+	std::uint32_t drop_count = 0; /* frames the socket lost, a running count */
 };
 
 /*
@@ -195,11 +195,11 @@ private:
 	bool fd_ = false;
 	std::vector<can_filter> kernel_filters_;
 	CanTxQueue tx_queue_;
-	CanTxQueue rx_ring_;		/* the same drop-oldest ring, for received frames */
+	CanTxQueue rx_ring_; /* the same drop-oldest ring, for received frames */
 	CanStats stats_;
 	std::uint64_t rx_dropped_ = 0;
-	std::uint64_t closed_dropped_ = 0;	/* sends while closed */
-	std::uint32_t kernel_drops_ = 0;	/* the socket's drop count last seen */
+	std::uint64_t closed_dropped_ = 0; /* sends while closed */
+	std::uint32_t kernel_drops_ = 0; /* the socket's drop count last seen */
 	std::int64_t next_reopen_ns_ = 0;
 	std::array<char, 256> error_{};
 
@@ -242,10 +242,10 @@ can_filter toKernelFilter(const CanFilter &filter);
 
 /* What an errno from writing a frame means. */
 enum class WriteErrorKind : std::uint8_t {
-	QueueFull,	/* EAGAIN, EWOULDBLOCK, ENOBUFS: keep the frame, try later */
-	Interrupted,	/* EINTR: try later, count nothing */
-	BadFrame,	/* EINVAL, EMSGSIZE, EOVERFLOW: drop this frame */
-	LinkLost,	/* anything else: the interface is down or gone */
+	QueueFull, /* EAGAIN, EWOULDBLOCK, ENOBUFS: keep the frame, try later */
+	Interrupted, /* EINTR: try later, count nothing */
+	BadFrame, /* EINVAL, EMSGSIZE, EOVERFLOW: drop this frame */
+	LinkLost, /* anything else: the interface is down or gone */
 };
 WriteErrorKind classifyWriteError(int err);
 
@@ -257,8 +257,8 @@ std::int64_t realtimeToMonotonicNs(std::int64_t rx_realtime_ns, std::int64_t rea
 struct InterfaceInfo {
 	int index = 0;
 	bool up = false;
-	bool is_can = false;	/* ARPHRD_CAN */
-	int mtu = 0;		/* CAN_MTU classic, CANFD_MTU FD-capable */
+	bool is_can = false; /* ARPHRD_CAN */
+	int mtu = 0; /* CAN_MTU classic, CANFD_MTU FD-capable */
 };
 /* Look an interface up with SIOCGIF* ioctls on any socket: 0, or the errno (ENODEV: none such). */
 int queryInterface(int fd, const char *name, InterfaceInfo *info);

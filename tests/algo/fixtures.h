@@ -30,8 +30,9 @@ inline TargetModel wedgeModel()
 {
 	TargetModel m;
 	m.name = "wedge";
-	for (const auto &p : { Eigen::Vector3d(-89, -38, 0), Eigen::Vector3d(-89, 38, 0), Eigen::Vector3d(0, 38, -40),
-			       Eigen::Vector3d(0, -38, -40), Eigen::Vector3d(89, -38, 0), Eigen::Vector3d(89, 38, 0) })
+	for (const auto &p : { Eigen::Vector3d(-89, -38, 0), Eigen::Vector3d(-89, 38, 0),
+			       Eigen::Vector3d(0, 38, -40), Eigen::Vector3d(0, -38, -40),
+			       Eigen::Vector3d(89, -38, 0), Eigen::Vector3d(89, 38, 0) })
 		m.points_mm.push_back(p);
 	m.faces.push_back({ 0, 1, 2, 3 });
 	m.faces.push_back({ 3, 2, 5, 4 });

@@ -1,8 +1,8 @@
 /* SPDX-License-Identifier: MIT */
-#include <gtest/gtest.h>
-
 #include <random>
 #include <vector>
+
+#include <gtest/gtest.h>
 
 #include "algo/ambient.h"
 
@@ -18,11 +18,14 @@ TEST(Ambient, SubtractsAndSaturatesAtZeroWithStrides)
 	std::mt19937 rng(5);
 	for (int y = 0; y < h; ++y)
 		for (int x = 0; x < w; ++x) {
-			lit[static_cast<std::size_t>(y * lit_stride + x)] = static_cast<std::uint8_t>(rng());
-			unlit[static_cast<std::size_t>(y * unlit_stride + x)] = static_cast<std::uint8_t>(rng());
+			lit[static_cast<std::size_t>(y * lit_stride + x)] =
+				static_cast<std::uint8_t>(rng());
+			unlit[static_cast<std::size_t>(y * unlit_stride + x)] =
+				static_cast<std::uint8_t>(rng());
 		}
-	ASSERT_TRUE(subtractAmbient(ImageView{ lit.data(), w, h, lit_stride }, ImageView{ unlit.data(), w, h, unlit_stride },
-				    out.data(), out_stride));
+	ASSERT_TRUE(subtractAmbient(ImageView{ lit.data(), w, h, lit_stride },
+				    ImageView{ unlit.data(), w, h, unlit_stride }, out.data(),
+				    out_stride));
 	int clipped = 0;
 	for (int y = 0; y < h; ++y) {
 		for (int x = 0; x < w; ++x) {
@@ -30,7 +33,8 @@ TEST(Ambient, SubtractsAndSaturatesAtZeroWithStrides)
 			const int b = unlit[static_cast<std::size_t>(y * unlit_stride + x)];
 			const int expected = a > b ? a - b : 0;
 			clipped += a <= b;
-			ASSERT_EQ(out[static_cast<std::size_t>(y * out_stride + x)], expected) << x << "," << y;
+			ASSERT_EQ(out[static_cast<std::size_t>(y * out_stride + x)], expected)
+				<< x << "," << y;
 		}
 		/* Padding beyond the width is never written. */
 		for (int x = w; x < out_stride; ++x)
@@ -42,9 +46,12 @@ TEST(Ambient, SubtractsAndSaturatesAtZeroWithStrides)
 TEST(Ambient, RefusesMismatchedSizes)
 {
 	std::vector<std::uint8_t> a(100, 9), b(100, 1), out(100, 3);
-	EXPECT_FALSE(subtractAmbient(ImageView{ a.data(), 10, 10, 10 }, ImageView{ b.data(), 9, 10, 10 }, out.data(), 10));
-	EXPECT_FALSE(subtractAmbient(ImageView{ a.data(), 10, 10, 10 }, ImageView{}, out.data(), 10));
-	EXPECT_FALSE(subtractAmbient(ImageView{ a.data(), 10, 10, 10 }, ImageView{ b.data(), 10, 10, 10 }, out.data(), 9));
+	EXPECT_FALSE(subtractAmbient(ImageView{ a.data(), 10, 10, 10 },
+				     ImageView{ b.data(), 9, 10, 10 }, out.data(), 10));
+	EXPECT_FALSE(
+		subtractAmbient(ImageView{ a.data(), 10, 10, 10 }, ImageView{}, out.data(), 10));
+	EXPECT_FALSE(subtractAmbient(ImageView{ a.data(), 10, 10, 10 },
+				     ImageView{ b.data(), 10, 10, 10 }, out.data(), 9));
 	EXPECT_EQ(out[0], 3);
 }
 

@@ -25,8 +25,10 @@ Eigen::Vector2d referenceDistort(const CameraIntrinsics &k, double x, double y)
 {
 	const double r2 = x * x + y * y;
 	const double r4 = r2 * r2;
-	const double xd = x * (1.0 + k.k1 * r2 + k.k2 * r4) + 2.0 * k.p1 * x * y + k.p2 * (r2 + 2.0 * x * x);
-	const double yd = y * (1.0 + k.k1 * r2 + k.k2 * r4) + k.p1 * (r2 + 2.0 * y * y) + 2.0 * k.p2 * x * y;
+	const double xd =
+		x * (1.0 + k.k1 * r2 + k.k2 * r4) + 2.0 * k.p1 * x * y + k.p2 * (r2 + 2.0 * x * x);
+	const double yd =
+		y * (1.0 + k.k1 * r2 + k.k2 * r4) + k.p1 * (r2 + 2.0 * y * y) + 2.0 * k.p2 * x * y;
 	return { xd, yd };
 }
 
@@ -112,7 +114,8 @@ TEST_P(CameraModelTest, ProjectJacobianMatchesFiniteDifferences)
 		Eigen::Matrix<double, 2, 3> J;
 		ASSERT_TRUE(cam.project(p, &uv, &J));
 		/* The projection itself. */
-		EXPECT_LT((uv - cam.normalizedToPixel({ p.x() / p.z(), p.y() / p.z() })).norm(), 1e-12);
+		EXPECT_LT((uv - cam.normalizedToPixel({ p.x() / p.z(), p.y() / p.z() })).norm(),
+			  1e-12);
 		Eigen::Matrix<double, 2, 3> Jn;
 		for (int c = 0; c < 3; ++c) {
 			const double h = 1e-4 * z;
@@ -157,7 +160,8 @@ TEST_P(CameraModelTest, InImage)
 INSTANTIATE_TEST_SUITE_P(ReferenceCameras, CameraModelTest,
 			 ::testing::Values(paperCamera(), distortedCamera()),
 			 [](const ::testing::TestParamInfo<CameraIntrinsics> &param_info) {
-				 return param_info.param.width == 512 ? std::string("Paper512") : std::string("Sensor1456");
+				 return param_info.param.width == 512 ? std::string("Paper512")
+								      : std::string("Sensor1456");
 			 });
 
 /*

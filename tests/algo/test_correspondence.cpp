@@ -25,9 +25,12 @@ TargetModel corner()
 	TargetModel m;
 	m.name = "corner";
 	/* Box corner at c; unit axes rotated so that the corner points along -z. */
-	const Eigen::Matrix3d R = (Eigen::AngleAxisd(0.9553166181245093 + 3.14159265358979323846, Eigen::Vector3d(1, -1, 0).normalized()))
+	const Eigen::Matrix3d R = (Eigen::AngleAxisd(0.9553166181245093 + 3.14159265358979323846,
+						     Eigen::Vector3d(1, -1, 0).normalized()))
 					  .toRotationMatrix();
-	auto P = [&](double x, double y, double z) { return Eigen::Vector3d(R * Eigen::Vector3d(x, y, z)); };
+	auto P = [&](double x, double y, double z) {
+		return Eigen::Vector3d(R * Eigen::Vector3d(x, y, z));
+	};
 	/* LED 0 the corner; 1,2,3 along the edges (different lengths); 4,5,6 on the face corners. */
 	m.points_mm.push_back(P(0, 0, 0));
 	m.points_mm.push_back(P(-80, 0, 0));
@@ -60,8 +63,9 @@ Pose makePose(double roll, double pan, double tilt, double x, double y, double z
  * Blobs at the projections of the LEDs the camera can see (on a face seen
  * from its front within 80 degrees, not hidden) plus clutter.
  */
-StaticVector<Blob, kMaxCandidates> observe(const TargetModel &m, const CameraModel &cam, const Pose &pose,
-					   std::uint32_t hidden, int clutter, double noise_px, std::mt19937 &rng)
+StaticVector<Blob, kMaxCandidates> observe(const TargetModel &m, const CameraModel &cam,
+					   const Pose &pose, std::uint32_t hidden, int clutter,
+					   double noise_px, std::mt19937 &rng)
 {
 	StaticVector<Eigen::Vector3d, kMaxFaces> normals;
 	m.frontNormals(&normals);
@@ -71,7 +75,8 @@ StaticVector<Blob, kMaxCandidates> observe(const TargetModel &m, const CameraMod
 		Eigen::Vector3d centre = Eigen::Vector3d::Zero();
 		for (int k = 0; k < 4; ++k)
 			centre += m.points_mm[m.faces[f][k]] / 4.0;
-		if (normals[f].dot((camera_t - centre).normalized()) > std::cos(80.0 * M_PI / 180.0))
+		if (normals[f].dot((camera_t - centre).normalized()) >
+		    std::cos(80.0 * M_PI / 180.0))
 			for (int k = 0; k < 4; ++k)
 				shining |= 1u << m.faces[f][k];
 	}
@@ -89,7 +94,8 @@ StaticVector<Blob, kMaxCandidates> observe(const TargetModel &m, const CameraMod
 		b.weight = 1000;
 		blobs.push_back(b);
 	}
-	std::uniform_real_distribution<double> u(0, cam.intrinsics().width - 1), v(0, cam.intrinsics().height - 1);
+	std::uniform_real_distribution<double> u(0, cam.intrinsics().width - 1),
+		v(0, cam.intrinsics().height - 1);
 	for (int c = 0; c < clutter; ++c) {
 		Blob b;
 		b.u_px = u(rng);
@@ -135,11 +141,14 @@ TEST(Correspondence, FindsPoseWithClutterAndHiddenLed)
 	for (const TargetModel &m : { test::wedgeModel(), corner() }) {
 		Correspondence c(m, cam, {});
 		int found = 0, trials = 0;
-		std::uniform_real_distribution<double> ang(-25, 25), range(300, 2000), lat(-0.2, 0.2);
+		std::uniform_real_distribution<double> ang(-25, 25), range(300, 2000),
+			lat(-0.2, 0.2);
 		for (int t = 0; t < 60; ++t) {
 			const double z = range(rng);
-			const Pose truth = makePose(ang(rng), ang(rng), ang(rng), lat(rng) * z, lat(rng) * z, z);
-			const std::uint32_t hidden = (t % 3 == 0) ? (1u << (t % m.points_mm.size())) : 0;
+			const Pose truth = makePose(ang(rng), ang(rng), ang(rng), lat(rng) * z,
+						    lat(rng) * z, z);
+			const std::uint32_t hidden = (t % 3 == 0) ? (1u << (t % m.points_mm.size()))
+								  : 0;
 			auto blobs = observe(m, cam, truth, hidden, 8, 0.1, rng);
 			CorrespondenceResult r;
 			++trials;
@@ -232,7 +241,8 @@ TEST(Correspondence, RandomPointsGiveNoPose)
 	for (const TargetModel &m : { test::wedgeModel(), corner() }) {
 		Correspondence c(m, cam, {});
 		for (int t = 0; t < 40; ++t) {
-			auto blobs = observe(m, cam, makePose(0, 0, 0, 0, 0, 1000), 0x7f, 12, 0.0, rng);
+			auto blobs =
+				observe(m, cam, makePose(0, 0, 0, 0, 0, 1000), 0x7f, 12, 0.0, rng);
 			CorrespondenceResult r;
 			EXPECT_FALSE(c.solve(blobs, nullptr, &r)) << m.name << " trial " << t;
 		}
@@ -251,22 +261,25 @@ TEST(Correspondence, TheNfaBoundDecidesAcceptance)
 	for (const TargetModel &m : { test::wedgeModel(), corner() }) {
 		int checked = 0;
 		for (int t = 0; t < 12; ++t) {
-			const Pose truth = makePose(10 - 2 * t, 5 + t, 3 * t, 20, -30, 600 + 100 * t);
+			const Pose truth =
+				makePose(10 - 2 * t, 5 + t, 3 * t, 20, -30, 600 + 100 * t);
 			auto blobs = observe(m, cam, truth, 0, 10, 0.1, rng);
 			Correspondence c(m, cam, {});
 			CorrespondenceResult r;
 			if (!c.solve(blobs, nullptr, &r))
 				continue;
 			++checked;
-			EXPECT_LE(r.log10_nfa, CorrespondenceConfig{}.max_log10_nfa) << m.name << " trial " << t;
+			EXPECT_LE(r.log10_nfa, CorrespondenceConfig{}.max_log10_nfa)
+				<< m.name << " trial " << t;
 			CorrespondenceConfig strict;
 			strict.max_log10_nfa = r.log10_nfa - 1.0;
-			strict.early_exit_log10_nfa = std::min(strict.early_exit_log10_nfa, strict.max_log10_nfa);
+			strict.early_exit_log10_nfa =
+				std::min(strict.early_exit_log10_nfa, strict.max_log10_nfa);
 			Correspondence cs(m, cam, strict);
 			CorrespondenceResult rs;
 			EXPECT_FALSE(cs.solve(blobs, nullptr, &rs))
-				<< m.name << " trial " << t << ": accepted at log10 NFA " << rs.log10_nfa
-				<< " with the bound at " << strict.max_log10_nfa;
+				<< m.name << " trial " << t << ": accepted at log10 NFA "
+				<< rs.log10_nfa << " with the bound at " << strict.max_log10_nfa;
 		}
 		EXPECT_GE(checked, 10) << m.name;
 	}
@@ -285,7 +298,8 @@ TEST(Correspondence, ClutterWeakensTheEvidence)
 	const Pose truth = makePose(8, -12, 20, 15, 10, 700);
 	auto sparse = observe(m, cam, truth, 0, 0, 0.1, rng);
 	auto dense = sparse;
-	std::uniform_real_distribution<double> u(0, cam.intrinsics().width - 1), v(0, cam.intrinsics().height - 1);
+	std::uniform_real_distribution<double> u(0, cam.intrinsics().width - 1),
+		v(0, cam.intrinsics().height - 1);
 	while (dense.size() < 40) {
 		Blob b;
 		b.u_px = u(rng);
@@ -309,7 +323,8 @@ TEST(Correspondence, DenseRandomPointsGiveNoPose)
 {
 	std::mt19937 rng(17);
 	const CameraModel cam(cam1456());
-	std::uniform_real_distribution<double> u(0, cam.intrinsics().width - 1), v(0, cam.intrinsics().height - 1);
+	std::uniform_real_distribution<double> u(0, cam.intrinsics().width - 1),
+		v(0, cam.intrinsics().height - 1);
 	for (const TargetModel &m : { test::wedgeModel(), corner() }) {
 		Correspondence c(m, cam, {});
 		for (int t = 0; t < 15; ++t) {
@@ -347,8 +362,8 @@ TEST(Correspondence, SingleFaceFarAndObliqueIsAmbiguousNotWrong)
 	 * or nothing may come out — never the mirror. */
 	TargetModel m;
 	m.name = "square";
-	for (const auto &p : { Eigen::Vector3d(-40, -40, 0), Eigen::Vector3d(40, -40, 0), Eigen::Vector3d(40, 40, 0),
-			       Eigen::Vector3d(-40, 40, 0) })
+	for (const auto &p : { Eigen::Vector3d(-40, -40, 0), Eigen::Vector3d(40, -40, 0),
+			       Eigen::Vector3d(40, 40, 0), Eigen::Vector3d(-40, 40, 0) })
 		m.points_mm.push_back(p);
 	m.faces.push_back({ 0, 1, 2, 3 });
 	std::mt19937 rng(9);
@@ -366,7 +381,9 @@ TEST(Correspondence, SingleFaceFarAndObliqueIsAmbiguousNotWrong)
 			/* Square symmetry: compare up to the model's own symmetries. */
 			double best = 1e9;
 			for (const auto &s : c.symmetries())
-				best = std::min(best, rotationAngleDeg(truth.R, r.refined.pose.R * s.transform.R));
+				best = std::min(best,
+						rotationAngleDeg(truth.R,
+								 r.refined.pose.R * s.transform.R));
 			wrong += best > 3.0;
 		}
 	}
@@ -382,7 +399,9 @@ TEST(Correspondence, SingleFaceFarAndObliqueIsAmbiguousNotWrong)
 			++near_found;
 			double best = 1e9;
 			for (const auto &s : c.symmetries())
-				best = std::min(best, rotationAngleDeg(truth.R, r.refined.pose.R * s.transform.R));
+				best = std::min(best,
+						rotationAngleDeg(truth.R,
+								 r.refined.pose.R * s.transform.R));
 			EXPECT_LT(best, 1.0);
 		}
 	}
@@ -403,7 +422,9 @@ TEST(Correspondence, AReflectionNearAFarLedDoesNotTurnTheFaceOver)
 	const CameraModel cam(cam1456());
 	const TargetModel m = test::wedgeModel();
 	Pose truth;
-	truth.R = Eigen::AngleAxisd(0.311398683, Eigen::Vector3d(-0.292763852, 0.944857394, -0.146744105).normalized())
+	truth.R = Eigen::AngleAxisd(
+			  0.311398683,
+			  Eigen::Vector3d(-0.292763852, 0.944857394, -0.146744105).normalized())
 			  .toRotationMatrix();
 	truth.t_mm = { -18.588317, -9.944561, 384.391099 };
 	const double seen[][6] = {
@@ -432,6 +453,8 @@ TEST(Correspondence, AReflectionNearAFarLedDoesNotTurnTheFaceOver)
 	EXPECT_EQ(r.match.pairs.size(), 5u);
 	/* The wedge's half turn about its axis is the same pose (a symmetry of the model). */
 	const double direct = rotationAngleDeg(truth.R, r.refined.pose.R);
-	const double turned = rotationAngleDeg(truth.R * c.symmetries().back().transform.R, r.refined.pose.R);
-	EXPECT_LT(std::min(direct, turned), 0.5) << "direct " << direct << " deg, half-turned " << turned << " deg";
+	const double turned =
+		rotationAngleDeg(truth.R * c.symmetries().back().transform.R, r.refined.pose.R);
+	EXPECT_LT(std::min(direct, turned), 0.5)
+		<< "direct " << direct << " deg, half-turned " << turned << " deg";
 }

@@ -405,9 +405,11 @@ TEST(Pgm, FileErrors)
 
 TEST(ModelJson, OptionalUncertaintyAndApproach)
 {
-	const std::string square = R"("points": [[0,0,0],[100,0,0],[100,100,0],[0,100,0]], "faces": [[0,1,2,3]])";
+	const std::string square =
+		R"("points": [[0,0,0],[100,0,0],[100,100,0],[0,100,0]], "faces": [[0,1,2,3]])";
 	const auto t = parseTargetModel(
-		"{" + square + R"(, "led_sigma_mm": 0.2, "approach": {"axis": [0, 0, -2], "max_deg": 60}})");
+		"{" + square +
+		R"(, "led_sigma_mm": 0.2, "approach": {"axis": [0, 0, -2], "max_deg": 60}})");
 	ASSERT_TRUE(t.ok()) << t.error;
 	EXPECT_EQ(t.value.led_sigma_mm, 0.2);
 	EXPECT_TRUE(t.value.approach.set);
@@ -430,15 +432,27 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 	EXPECT_FALSE(loadCameraIntrinsics(kData + "/cam512.json").value.sigma.any());
 
 	const std::vector<BadCase> targets = {
-		{ "negative tolerance", "{" + square + R"(, "led_sigma_mm": -1})", "'led_sigma_mm' must be a tolerance >= 0" },
-		{ "string tolerance", "{" + square + R"(, "led_sigma_mm": "0.1"})", "'led_sigma_mm' must be a number" },
-		{ "approach not object", "{" + square + R"(, "approach": [0, 0, 1]})", "'approach' must be an object" },
-		{ "no axis", "{" + square + R"(, "approach": {"max_deg": 30}})", "'approach.axis' is missing" },
-		{ "short axis", "{" + square + R"(, "approach": {"axis": [0, 1], "max_deg": 30}})", "'approach.axis' must be [x, y, z]" },
-		{ "zero axis", "{" + square + R"(, "approach": {"axis": [0, 0, 0], "max_deg": 30}})", "non-zero direction" },
-		{ "no max_deg", "{" + square + R"(, "approach": {"axis": [0, 0, 1]}})", "'max_deg' is missing" },
-		{ "zero max_deg", "{" + square + R"(, "approach": {"axis": [0, 0, 1], "max_deg": 0}})", "'approach.max_deg' must be an angle in (0, 180]" },
-		{ "big max_deg", "{" + square + R"(, "approach": {"axis": [0, 0, 1], "max_deg": 181}})", "'approach.max_deg' must be an angle" },
+		{ "negative tolerance", "{" + square + R"(, "led_sigma_mm": -1})",
+		  "'led_sigma_mm' must be a tolerance >= 0" },
+		{ "string tolerance", "{" + square + R"(, "led_sigma_mm": "0.1"})",
+		  "'led_sigma_mm' must be a number" },
+		{ "approach not object", "{" + square + R"(, "approach": [0, 0, 1]})",
+		  "'approach' must be an object" },
+		{ "no axis", "{" + square + R"(, "approach": {"max_deg": 30}})",
+		  "'approach.axis' is missing" },
+		{ "short axis", "{" + square + R"(, "approach": {"axis": [0, 1], "max_deg": 30}})",
+		  "'approach.axis' must be [x, y, z]" },
+		{ "zero axis",
+		  "{" + square + R"(, "approach": {"axis": [0, 0, 0], "max_deg": 30}})",
+		  "non-zero direction" },
+		{ "no max_deg", "{" + square + R"(, "approach": {"axis": [0, 0, 1]}})",
+		  "'max_deg' is missing" },
+		{ "zero max_deg",
+		  "{" + square + R"(, "approach": {"axis": [0, 0, 1], "max_deg": 0}})",
+		  "'approach.max_deg' must be an angle in (0, 180]" },
+		{ "big max_deg",
+		  "{" + square + R"(, "approach": {"axis": [0, 0, 1], "max_deg": 181}})",
+		  "'approach.max_deg' must be an angle" },
 	};
 	for (const BadCase &b : targets) {
 		const auto r = parseTargetModel(b.text, "bad.json");
@@ -446,13 +460,19 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 		EXPECT_EQ(r.error.rfind("bad.json: ", 0), 0u) << b.what << ": " << r.error;
 		EXPECT_NE(r.error.find(b.expected), std::string::npos) << b.what << ": " << r.error;
 	}
-	const std::string cam = R"("width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320, "cy": 240)";
+	const std::string cam =
+		R"("width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320, "cy": 240)";
 	const std::vector<BadCase> cameras = {
-		{ "sigma not object", "{" + cam + R"(, "sigma": 0.5})", "'sigma' must be an object" },
-		{ "unknown sigma", "{" + cam + R"(, "sigma": {"k3": 0.1}})", "'sigma.k3' is not a parameter" },
-		{ "negative sigma", "{" + cam + R"(, "sigma": {"fx": -1}})", "'sigma.fx' must be a 1-sigma value >= 0" },
-		{ "string sigma", "{" + cam + R"(, "sigma": {"cx": "1"}})", "'cx' must be a number" },
-		{ "string rms", "{" + cam + R"(, "rms_px": "small"})", "'rms_px' must be a number" },
+		{ "sigma not object", "{" + cam + R"(, "sigma": 0.5})",
+		  "'sigma' must be an object" },
+		{ "unknown sigma", "{" + cam + R"(, "sigma": {"k3": 0.1}})",
+		  "'sigma.k3' is not a parameter" },
+		{ "negative sigma", "{" + cam + R"(, "sigma": {"fx": -1}})",
+		  "'sigma.fx' must be a 1-sigma value >= 0" },
+		{ "string sigma", "{" + cam + R"(, "sigma": {"cx": "1"}})",
+		  "'cx' must be a number" },
+		{ "string rms", "{" + cam + R"(, "rms_px": "small"})",
+		  "'rms_px' must be a number" },
 	};
 	for (const BadCase &b : cameras) {
 		const auto r = parseCameraIntrinsics(b.text, "cam.json");

@@ -17,9 +17,9 @@
 
 #include <gtest/gtest.h>
 
+#include "../common/counting_allocator.h"
 #include "algo/pipeline.h"
 #include "algo/synth/renderer.h"
-#include "../common/counting_allocator.h"
 #include "fixtures.h"
 
 using namespace dockpose;
@@ -81,7 +81,8 @@ TEST(NoAlloc, PipelineSteadyState)
 		o.occlusion_mask = (i % 6 == 3) ? 0b000100u : 0u;
 		Image img;
 		const double range = 1800.0 - 60.0 * i;
-		renderer.render(poseAt(cam, target, range, { 5.0, 10.0 - i, 3.0 }), o, 100 + i, &img);
+		renderer.render(poseAt(cam, target, range, { 5.0, 10.0 - i, 3.0 }), o, 100 + i,
+				&img);
 		frames.push_back(std::move(img));
 	}
 	frames.emplace_back(cam.width, cam.height, 10); /* nothing in view */

@@ -22,8 +22,11 @@ TEST(P3p, OneSolutionIsTheTruthAndAllFitTheRays)
 		for (auto &m : model)
 			m = Eigen::Vector3d(u(rng), u(rng), u(rng)) * 100.0;
 		Pose truth;
-		truth.R = Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
-		truth.t_mm = Eigen::Vector3d(u(rng) * 200.0, u(rng) * 200.0, 600.0 + 1500.0 * (u(rng) + 1.0));
+		truth.R = Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng))
+				  .normalized()
+				  .toRotationMatrix();
+		truth.t_mm = Eigen::Vector3d(u(rng) * 200.0, u(rng) * 200.0,
+					     600.0 + 1500.0 * (u(rng) + 1.0));
 		Eigen::Vector2d xy[3];
 		bool front = true;
 		for (int i = 0; i < 3; ++i) {
@@ -41,10 +44,12 @@ TEST(P3p, OneSolutionIsTheTruthAndAllFitTheRays)
 			for (int i = 0; i < 3; ++i) {
 				const Eigen::Vector3d c = poses[k].apply(model[i]);
 				ASSERT_GT(c.z(), 0.0);
-				EXPECT_LT((c.head<2>() / c.z() - xy[i]).norm(), 1e-6) << "trial " << t;
+				EXPECT_LT((c.head<2>() / c.z() - xy[i]).norm(), 1e-6)
+					<< "trial " << t;
 			}
-			hit = hit || (rotationAngleDeg(poses[k].R, truth.R) < 1e-3 &&
-				      (poses[k].t_mm - truth.t_mm).norm() < 1e-3 * truth.t_mm.norm());
+			hit = hit ||
+			      (rotationAngleDeg(poses[k].R, truth.R) < 1e-3 &&
+			       (poses[k].t_mm - truth.t_mm).norm() < 1e-3 * truth.t_mm.norm());
 		}
 		found += hit;
 	}

@@ -37,8 +37,8 @@ struct E2eCase {
 
 void PrintTo(const E2eCase &s, std::ostream *os)
 {
-	*os << s.target << " on " << s.camera << ", " << s.min_range_mm << "-" << s.max_range_mm << " mm"
-	    << (s.clutter ? ", clutter" : "");
+	*os << s.target << " on " << s.camera << ", " << s.min_range_mm << "-" << s.max_range_mm
+	    << " mm" << (s.clutter ? ", clutter" : "");
 }
 
 using test::dataPath;
@@ -68,19 +68,22 @@ TEST_P(EndToEnd, CorrectPosesAndNeverAWrongOne)
 	e.min_range_mm = s.min_range_mm;
 	e.max_range_mm = s.max_range_mm;
 	e.clutter = s.clutter;
-	const EvaluationTally t = evaluate(target.value, camera.value, PipelineConfig{}, e,
-					   [](const FrameOutcome &f, const Image &) {
-						   if (f.result->found && !f.correct)
-							   ADD_FAILURE() << "wrong pose reported as found: frame " << f.index
-									 << " range " << f.range_mm << " mm -> rotation error "
-									 << f.rot_err_deg << "°, translation error "
-									 << f.trans_err_mm << " mm, leds " << f.result->leds_used
-									 << " rms " << f.result->rms_px;
-					   });
+	const EvaluationTally t =
+		evaluate(target.value, camera.value, PipelineConfig{}, e,
+			 [](const FrameOutcome &f, const Image &) {
+				 if (f.result->found && !f.correct)
+					 ADD_FAILURE() << "wrong pose reported as found: frame "
+						       << f.index << " range " << f.range_mm
+						       << " mm -> rotation error " << f.rot_err_deg
+						       << "°, translation error " << f.trans_err_mm
+						       << " mm, leds " << f.result->leds_used
+						       << " rms " << f.result->rms_px;
+			 });
 	std::printf("%s on %s, %.0f-%.0f mm%s: %d frames, %d found, %d correct, %d wrong; "
 		    "%d of %d frames showing >= 5 LEDs correct; worst %.2f°, %.2f%% of range\n",
-		    s.target, s.camera, s.min_range_mm, s.max_range_mm, s.clutter ? ", clutter" : "", t.frames,
-		    t.found, t.correct, t.wrong, t.solvable_correct, t.solvable, t.worst_rot_err_deg,
+		    s.target, s.camera, s.min_range_mm, s.max_range_mm,
+		    s.clutter ? ", clutter" : "", t.frames, t.found, t.correct, t.wrong,
+		    t.solvable_correct, t.solvable, t.worst_rot_err_deg,
 		    100.0 * t.worst_trans_err_frac);
 	EXPECT_EQ(t.wrong, 0);
 	/* Frames showing fewer than five LEDs (faces turned away, one hidden) cannot be solved cold. */
@@ -96,8 +99,12 @@ INSTANTIATE_TEST_SUITE_P(
 			  E2eCase{ "wedge.json", "cam1456.json", 300, 2100, true, 80, 98 },
 			  E2eCase{ "corner.json", "cam1456.json", 300, 2100, true, 80, 95 }),
 	[](const ::testing::TestParamInfo<E2eCase> &param_info) {
-		std::string name = std::string(param_info.param.target).substr(0, std::string(param_info.param.target).find('.')) +
-				   "_" + std::string(param_info.param.camera).substr(0, std::string(param_info.param.camera).find('.'));
+		std::string name =
+			std::string(param_info.param.target)
+				.substr(0, std::string(param_info.param.target).find('.')) +
+			"_" +
+			std::string(param_info.param.camera)
+				.substr(0, std::string(param_info.param.camera).find('.'));
 		return name + (param_info.param.clutter ? "_clutter" : "_clean");
 	});
 
@@ -120,8 +127,9 @@ TEST_F(EndToEndTracking, ApproachIsTrackedFrameToFrame)
 	const int n = 40;
 	for (int i = 0; i < n; ++i) {
 		const double range = 2000.0 - 40.0 * i;
-		const Pose truth = poseAt(camera.value, target.value, range, { 10.0 - 0.3 * i, -8.0 + 0.2 * i, 4.0 },
-					  0.45 + 0.002 * i, 0.55 - 0.002 * i);
+		const Pose truth = poseAt(camera.value, target.value, range,
+					  { 10.0 - 0.3 * i, -8.0 + 0.2 * i, 4.0 }, 0.45 + 0.002 * i,
+					  0.55 - 0.002 * i);
 		RenderOptions o;
 		o.reflections = 3;
 		renderer.render(truth, o, 77 + i, &frame);

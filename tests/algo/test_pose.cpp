@@ -30,27 +30,21 @@ constexpr double kDeg = kPi / 180.0;
 Eigen::Matrix3d Rx(double a)
 {
 	Eigen::Matrix3d r;
-	r << 1, 0, 0,
-		0, std::cos(a), -std::sin(a),
-		0, std::sin(a), std::cos(a);
+	r << 1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a);
 	return r;
 }
 
 Eigen::Matrix3d Ry(double a)
 {
 	Eigen::Matrix3d r;
-	r << std::cos(a), 0, std::sin(a),
-		0, 1, 0,
-		-std::sin(a), 0, std::cos(a);
+	r << std::cos(a), 0, std::sin(a), 0, 1, 0, -std::sin(a), 0, std::cos(a);
 	return r;
 }
 
 Eigen::Matrix3d Rz(double a)
 {
 	Eigen::Matrix3d r;
-	r << std::cos(a), -std::sin(a), 0,
-		std::sin(a), std::cos(a), 0,
-		0, 0, 1;
+	r << std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a), 0, 0, 0, 1;
 	return r;
 }
 
@@ -117,7 +111,8 @@ void randomConvexQuad(std::mt19937 &rng, Eigen::Vector3d quad[4])
  * (sign of the face normal (M1 - M0) x (M2 - M0) along the viewing ray) and
  * no more obliquely than max_oblique_deg.
  */
-Pose randomPoseFacing(std::mt19937 &rng, const Eigen::Vector3d quad[4], bool front, double max_oblique_deg)
+Pose randomPoseFacing(std::mt19937 &rng, const Eigen::Vector3d quad[4], bool front,
+		      double max_oblique_deg)
 {
 	std::uniform_real_distribution<double> range(300.0, 2000.0);
 	std::uniform_real_distribution<double> off(-0.27, 0.27);
@@ -166,19 +161,23 @@ TEST(Rotation, RollPanTiltIsRxRyRz)
 	std::uniform_real_distribution<double> u(-180.0, 180.0);
 	for (int i = 0; i < 200; ++i) {
 		const Eigen::Vector3d rpy{ u(rng), u(rng) / 2.0, u(rng) };
-		const Eigen::Matrix3d expected = Rx(rpy.x() * kDeg) * Ry(rpy.y() * kDeg) * Rz(rpy.z() * kDeg);
+		const Eigen::Matrix3d expected =
+			Rx(rpy.x() * kDeg) * Ry(rpy.y() * kDeg) * Rz(rpy.z() * kDeg);
 		EXPECT_LT((rotationFromRollPanTiltDeg(rpy) - expected).norm(), 1e-14);
 	}
 	/* Roll alone turns about camera x: +90 deg takes y (down) to z (forward). */
-	EXPECT_LT((rotationFromRollPanTiltDeg({ 90, 0, 0 }) * Eigen::Vector3d::UnitY() - Eigen::Vector3d::UnitZ())
+	EXPECT_LT((rotationFromRollPanTiltDeg({ 90, 0, 0 }) * Eigen::Vector3d::UnitY() -
+		   Eigen::Vector3d::UnitZ())
 			  .norm(),
 		  1e-15);
 	/* Pan alone turns about y: +90 deg takes z to x. */
-	EXPECT_LT((rotationFromRollPanTiltDeg({ 0, 90, 0 }) * Eigen::Vector3d::UnitZ() - Eigen::Vector3d::UnitX())
+	EXPECT_LT((rotationFromRollPanTiltDeg({ 0, 90, 0 }) * Eigen::Vector3d::UnitZ() -
+		   Eigen::Vector3d::UnitX())
 			  .norm(),
 		  1e-15);
 	/* Tilt alone turns about z: +90 deg takes x to y. */
-	EXPECT_LT((rotationFromRollPanTiltDeg({ 0, 0, 90 }) * Eigen::Vector3d::UnitX() - Eigen::Vector3d::UnitY())
+	EXPECT_LT((rotationFromRollPanTiltDeg({ 0, 0, 90 }) * Eigen::Vector3d::UnitX() -
+		   Eigen::Vector3d::UnitY())
 			  .norm(),
 		  1e-15);
 	/* The order: roll applied last (outermost), tilt first. */
@@ -194,8 +193,10 @@ TEST(Rotation, RollPanTiltRoundTrip)
 	std::uniform_real_distribution<double> p(-89.9, 89.9);
 	for (int i = 0; i < 1000; ++i) {
 		const Eigen::Vector3d rpy{ u(rng), p(rng), u(rng) };
-		const Eigen::Vector3d back = rollPanTiltDegFromRotation(rotationFromRollPanTiltDeg(rpy));
-		EXPECT_LT((back - rpy).norm(), 1e-9) << rpy.transpose() << " -> " << back.transpose();
+		const Eigen::Vector3d back =
+			rollPanTiltDegFromRotation(rotationFromRollPanTiltDeg(rpy));
+		EXPECT_LT((back - rpy).norm(), 1e-9)
+			<< rpy.transpose() << " -> " << back.transpose();
 	}
 	for (int i = 0; i < 1000; ++i) {
 		const Eigen::Matrix3d R = randomRotation(rng);
@@ -211,7 +212,8 @@ TEST(Rotation, GimbalLockIsGraceful)
 	std::uniform_real_distribution<double> u(-179.0, 179.0);
 	for (double pan : { 90.0, -90.0, 90.0 - 1e-6, -90.0 + 1e-9, 90.0 - 1e-12, 89.99 }) {
 		for (int i = 0; i < 50; ++i) {
-			const Eigen::Matrix3d R = rotationFromRollPanTiltDeg({ u(rng), pan, u(rng) });
+			const Eigen::Matrix3d R =
+				rotationFromRollPanTiltDeg({ u(rng), pan, u(rng) });
 			const Eigen::Vector3d rpy = rollPanTiltDegFromRotation(R);
 			ASSERT_TRUE(rpy.allFinite());
 			EXPECT_LE(std::abs(rpy.y()), 90.0);
@@ -250,7 +252,8 @@ TEST(Rotation, AngleBetweenRotations)
 	std::mt19937 rng(5);
 	for (double deg : { 0.0, 1e-7, 1e-3, 0.5, 30.0, 90.0, 170.0, 179.999, 180.0 }) {
 		const Eigen::Matrix3d a = randomRotation(rng);
-		const Eigen::Matrix3d b = a * Eigen::AngleAxisd(deg * kDeg, randomUnit(rng)).toRotationMatrix();
+		const Eigen::Matrix3d b =
+			a * Eigen::AngleAxisd(deg * kDeg, randomUnit(rng)).toRotationMatrix();
 		EXPECT_NEAR(rotationAngleDeg(a, b), deg, 1e-9 * std::max(1.0, deg)) << deg;
 		EXPECT_NEAR(rotationAngleDeg(b, a), deg, 1e-9 * std::max(1.0, deg)) << deg;
 	}
@@ -328,7 +331,10 @@ TEST(SolveFourCoplanar, WedgeFacesAtWorkingRanges)
 
 TEST(SolveFourCoplanar, RefusesCollinearPoints)
 {
-	const Eigen::Vector3d square[4] = { { 0, 0, 0 }, { 100, 0, 0 }, { 100, 100, 0 }, { 0, 100, 0 } };
+	const Eigen::Vector3d square[4] = { { 0, 0, 0 },
+					    { 100, 0, 0 },
+					    { 100, 100, 0 },
+					    { 0, 100, 0 } };
 	Pose truth;
 	truth.R = rotationFromRollPanTiltDeg({ 10, -20, 5 });
 	truth.t_mm = { 20, -10, 800 };
@@ -345,7 +351,10 @@ TEST(SolveFourCoplanar, RefusesCollinearPoints)
 		bad[i] = xy[0] + (xy[2] - xy[0]) * (0.3 * i);
 	EXPECT_FALSE(solveFourCoplanar(square, bad, &pose));
 	/* Three collinear model points. */
-	const Eigen::Vector3d line_model[4] = { { 0, 0, 0 }, { 100, 0, 0 }, { 200, 0, 0 }, { 0, 100, 0 } };
+	const Eigen::Vector3d line_model[4] = { { 0, 0, 0 },
+						{ 100, 0, 0 },
+						{ 200, 0, 0 },
+						{ 0, 100, 0 } };
 	EXPECT_FALSE(solveFourCoplanar(line_model, xy, &pose));
 	/* A face seen exactly edge-on. */
 	Pose edge = truth;
@@ -446,13 +455,15 @@ TEST(HornFit, ExactOnNoiseFreeData)
 		const int n = count(rng);
 		const bool planar = trial % 3 == 0;
 		/* Far from the origin on both sides: the centroid form of t matters. */
-		const Eigen::Vector3d centre{ 400.0 + coord(rng), -300.0 + coord(rng), 200.0 + coord(rng) };
+		const Eigen::Vector3d centre{ 400.0 + coord(rng), -300.0 + coord(rng),
+					      200.0 + coord(rng) };
 		Eigen::Vector3d M[16], P[16];
 		const Eigen::Matrix3d R = randomRotation(rng);
 		const Eigen::Vector3d t{ 5 * coord(rng), 5 * coord(rng), 1000.0 + 5 * coord(rng) };
 		const double s = trial % 2 ? scale(rng) : 1.0;
 		for (int i = 0; i < n; ++i) {
-			M[i] = centre + Eigen::Vector3d(coord(rng), coord(rng), planar ? 0.0 : coord(rng));
+			M[i] = centre +
+			       Eigen::Vector3d(coord(rng), coord(rng), planar ? 0.0 : coord(rng));
 			P[i] = s * R * M[i] + t;
 		}
 		Pose pose;
@@ -490,8 +501,10 @@ TEST(HornFit, MatchesUmeyamaOnNoisyData)
 		const Eigen::Vector3d t{ coord(rng), coord(rng), 800.0 };
 		const double s = with_scale ? 1.7 : 1.0;
 		for (int i = 0; i < n; ++i) {
-			M[i] = Eigen::Vector3d(coord(rng), coord(rng), coord(rng)) + Eigen::Vector3d(50, 60, -70);
-			P[i] = s * R * M[i] + t + Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+			M[i] = Eigen::Vector3d(coord(rng), coord(rng), coord(rng)) +
+			       Eigen::Vector3d(50, 60, -70);
+			P[i] = s * R * M[i] + t +
+			       Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
 			src.col(i) = M[i];
 			dst.col(i) = P[i];
 		}
@@ -508,8 +521,8 @@ TEST(HornFit, MatchesUmeyamaOnNoisyData)
 			EXPECT_EQ(s_fit, 1.0);
 		} else {
 			/* Horn's symmetric scale, and t = P_bar - s R M_bar. */
-			const double expected_s =
-				std::sqrt((dst.colwise() - p_bar).squaredNorm() / (src.colwise() - m_bar).squaredNorm());
+			const double expected_s = std::sqrt((dst.colwise() - p_bar).squaredNorm() /
+							    (src.colwise() - m_bar).squaredNorm());
 			EXPECT_NEAR(s_fit, expected_s, 1e-12 * expected_s);
 			EXPECT_LT((pose.t_mm - (p_bar - s_fit * pose.R * m_bar)).norm(), 1e-9);
 		}
@@ -520,7 +533,8 @@ TEST(HornFit, MatchesUmeyamaOnNoisyData)
 
 		/* A minimum: small turns about the centroid only make it worse. */
 		for (int k = 0; k < 6; ++k) {
-			const Eigen::Matrix3d dR = Eigen::AngleAxisd(1e-3, randomUnit(rng)).toRotationMatrix();
+			const Eigen::Matrix3d dR =
+				Eigen::AngleAxisd(1e-3, randomUnit(rng)).toRotationMatrix();
 			const Eigen::Matrix3d R2 = dR * pose.R;
 			const Eigen::Vector3d t2 = p_bar - s_fit * R2 * m_bar;
 			double sse2 = 0.0;
@@ -534,16 +548,19 @@ TEST(HornFit, MatchesUmeyamaOnNoisyData)
 TEST(HornFit, RefusesDegenerateInput)
 {
 	const Eigen::Vector3d M[4] = { { 0, 0, 0 }, { 10, 0, 0 }, { 0, 10, 0 }, { 0, 0, 10 } };
-	const Eigen::Vector3d line[4] = { { 0, 0, 0 }, { 10, 10, 10 }, { 20, 20, 20 }, { -5, -5, -5 } };
+	const Eigen::Vector3d line[4] = { { 0, 0, 0 },
+					  { 10, 10, 10 },
+					  { 20, 20, 20 },
+					  { -5, -5, -5 } };
 	const Eigen::Vector3d same[4] = { { 1, 2, 3 }, { 1, 2, 3 }, { 1, 2, 3 }, { 1, 2, 3 } };
 	Pose pose;
 	EXPECT_TRUE(hornFit(M, M, 4, &pose));
 	EXPECT_TRUE(hornFit(M, M, 3, &pose));
 	EXPECT_FALSE(hornFit(M, M, 2, &pose));
 	EXPECT_FALSE(hornFit(M, M, 0, &pose));
-	EXPECT_FALSE(hornFit(line, line, 4, &pose));	/* collinear both */
-	EXPECT_FALSE(hornFit(line, M, 4, &pose));	/* collinear model */
-	EXPECT_FALSE(hornFit(M, line, 4, &pose));	/* collinear measurements */
+	EXPECT_FALSE(hornFit(line, line, 4, &pose)); /* collinear both */
+	EXPECT_FALSE(hornFit(line, M, 4, &pose)); /* collinear model */
+	EXPECT_FALSE(hornFit(M, line, 4, &pose)); /* collinear measurements */
 	EXPECT_FALSE(hornFit(M, same, 4, &pose, true)); /* all measurements at one point */
 	EXPECT_FALSE(hornFit(same, M, 4, &pose));
 }
@@ -611,7 +628,8 @@ TEST(RefinePose, ExactOnNoiseFreeData)
 		projectPixels(s, truth, px);
 		const Pose start = perturb(truth, rng, 5.0, 0.05 * truth.t_mm.z());
 		RefineResult r;
-		ASSERT_TRUE(refinePose(s.camera, s.model, px, s.n, start, RefineOptions{}, &r)) << trial;
+		ASSERT_TRUE(refinePose(s.camera, s.model, px, s.n, start, RefineOptions{}, &r))
+			<< trial;
 		EXPECT_TRUE(r.converged);
 		EXPECT_LT(r.iterations, RefineOptions{}.max_iterations);
 		EXPECT_LT(angleRad(r.pose.R, truth.R), 1e-9) << trial;
@@ -685,7 +703,8 @@ TEST(RefinePose, CovarianceMatchesEmpiricalScatter)
 	std::normal_distribution<double> noise(0.0, sigma);
 
 	const Eigen::Vector3d rpy_true{ 15.0, -25.0, 10.0 };
-	const Pose truth{ rotationFromRollPanTiltDeg(rpy_true), Eigen::Vector3d(40.0, -30.0, 900.0) };
+	const Pose truth{ rotationFromRollPanTiltDeg(rpy_true),
+			  Eigen::Vector3d(40.0, -30.0, 900.0) };
 	Eigen::Vector2d clean[8];
 	projectPixels(s, truth, clean);
 
@@ -695,7 +714,8 @@ TEST(RefinePose, CovarianceMatchesEmpiricalScatter)
 		const int draws = 600;
 		Eigen::Matrix<double, 6, 6> scatter = Eigen::Matrix<double, 6, 6>::Zero();
 		Eigen::Matrix<double, 6, 6> mean_cov = Eigen::Matrix<double, 6, 6>::Zero();
-		Eigen::Vector3d rpy_var = Eigen::Vector3d::Zero(), rpy_sigma_sum = Eigen::Vector3d::Zero();
+		Eigen::Vector3d rpy_var = Eigen::Vector3d::Zero(),
+				rpy_sigma_sum = Eigen::Vector3d::Zero();
 		double chi2_sum = 0.0;
 		for (int d = 0; d < draws; ++d) {
 			Eigen::Vector2d px[8];
@@ -710,7 +730,8 @@ TEST(RefinePose, CovarianceMatchesEmpiricalScatter)
 			mean_cov += r.covariance / draws;
 			chi2_sum += err.dot(r.covariance.ldlt().solve(err));
 
-			const Eigen::Vector3d rpy_err = rollPanTiltDegFromRotation(r.pose.R) - rpy_true;
+			const Eigen::Vector3d rpy_err =
+				rollPanTiltDegFromRotation(r.pose.R) - rpy_true;
 			rpy_var += rpy_err.cwiseAbs2() / draws;
 			rpy_sigma_sum += rollPanTiltSigmaDeg(r.pose.R, r.covariance) / draws;
 		}
@@ -779,7 +800,8 @@ TEST(RefinePose, RollPanTiltSigmaMatchesNumericPropagation)
 	std::uniform_real_distribution<double> ang(-170.0, 170.0);
 	std::uniform_real_distribution<double> pan(-80.0, 80.0);
 	for (int trial = 0; trial < 200; ++trial) {
-		const Eigen::Matrix3d R = rotationFromRollPanTiltDeg({ ang(rng), pan(rng), ang(rng) });
+		const Eigen::Matrix3d R =
+			rotationFromRollPanTiltDeg({ ang(rng), pan(rng), ang(rng) });
 		Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Random();
 		const Eigen::Matrix<double, 6, 6> cov = 1e-4 * A * A.transpose();
 		/* d(rpy)/dw by central differences of the left perturbation. */
@@ -787,21 +809,22 @@ TEST(RefinePose, RollPanTiltSigmaMatchesNumericPropagation)
 		const double h = 1e-6;
 		for (int k = 0; k < 3; ++k) {
 			const Eigen::Vector3d w = h * Eigen::Vector3d::Unit(k);
-			const Eigen::Vector3d plus =
-				rollPanTiltDegFromRotation(Eigen::AngleAxisd(h, w / h).toRotationMatrix() * R);
-			const Eigen::Vector3d minus =
-				rollPanTiltDegFromRotation(Eigen::AngleAxisd(-h, w / h).toRotationMatrix() * R);
+			const Eigen::Vector3d plus = rollPanTiltDegFromRotation(
+				Eigen::AngleAxisd(h, w / h).toRotationMatrix() * R);
+			const Eigen::Vector3d minus = rollPanTiltDegFromRotation(
+				Eigen::AngleAxisd(-h, w / h).toRotationMatrix() * R);
 			J.col(k) = (plus - minus) / (2.0 * h);
 		}
 		const Eigen::Matrix3d C = J * cov.bottomRightCorner<3, 3>() * J.transpose();
 		const Eigen::Vector3d expected = C.diagonal().cwiseSqrt();
 		const Eigen::Vector3d got = rollPanTiltSigmaDeg(R, cov);
-		EXPECT_LT((got - expected).norm(), 1e-5 * expected.norm()) << got.transpose() << " vs "
-									 << expected.transpose();
+		EXPECT_LT((got - expected).norm(), 1e-5 * expected.norm())
+			<< got.transpose() << " vs " << expected.transpose();
 	}
 	/* Gimbal lock: roll and tilt undefined, pan still finite. */
 	Eigen::Matrix<double, 6, 6> cov = 1e-6 * Eigen::Matrix<double, 6, 6>::Identity();
-	const Eigen::Vector3d lock = rollPanTiltSigmaDeg(rotationFromRollPanTiltDeg({ 30, 90, 0 }), cov);
+	const Eigen::Vector3d lock =
+		rollPanTiltSigmaDeg(rotationFromRollPanTiltDeg({ 30, 90, 0 }), cov);
 	EXPECT_TRUE(std::isfinite(lock.y()));
 	EXPECT_NEAR(lock.y(), 1e-3 * 180.0 / kPi, 1e-9);
 	EXPECT_FALSE(std::isfinite(lock.x()) && lock.x() < 1e3);

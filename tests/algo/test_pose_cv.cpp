@@ -51,22 +51,32 @@ struct Target {
 Target wedge()
 {
 	const TargetModel m = test::wedgeModel();
-	return { "wedge", { m.points_mm.begin(), m.points_mm.end() }, { m.faces.begin(), m.faces.end() } };
+	return { "wedge",
+		 { m.points_mm.begin(), m.points_mm.end() },
+		 { m.faces.begin(), m.faces.end() } };
 }
 
 /* A wedge with a flat top: 8 LEDs, three faces. */
 Target roof()
 {
 	return { "roof",
-		 { { -89, -38, 0 }, { -89, 38, 0 }, { -30, 38, -40 }, { -30, -38, -40 }, { 30, -38, -40 },
-		   { 30, 38, -40 }, { 89, -38, 0 }, { 89, 38, 0 } },
+		 { { -89, -38, 0 },
+		   { -89, 38, 0 },
+		   { -30, 38, -40 },
+		   { -30, -38, -40 },
+		   { 30, -38, -40 },
+		   { 30, 38, -40 },
+		   { 89, -38, 0 },
+		   { 89, 38, 0 } },
 		 { { 0, 1, 2, 3 }, { 3, 2, 5, 4 }, { 4, 5, 7, 6 } } };
 }
 
 /* One face alone: four coplanar LEDs. */
 Target face()
 {
-	return { "face", { { -89, -38, 0 }, { -89, 38, 0 }, { 0, 38, -40 }, { 0, -38, -40 } }, { { 0, 1, 2, 3 } } };
+	return { "face",
+		 { { -89, -38, 0 }, { -89, 38, 0 }, { 0, 38, -40 }, { 0, -38, -40 } },
+		 { { 0, 1, 2, 3 } } };
 }
 
 struct Errors {
@@ -81,8 +91,8 @@ double median(std::vector<double> v)
 }
 
 /* dockpose: closed form on each face, refined over all points; the lowest rms wins. */
-bool dockposeSolve(const CameraModel &cam, const Target &target, const std::vector<Eigen::Vector2d> &px,
-		   Pose *pose)
+bool dockposeSolve(const CameraModel &cam, const Target &target,
+		   const std::vector<Eigen::Vector2d> &px, Pose *pose)
 {
 	const int n = static_cast<int>(target.points.size());
 	double best_rms = std::numeric_limits<double>::infinity();
@@ -98,7 +108,8 @@ bool dockposeSolve(const CameraModel &cam, const Target &target, const std::vect
 		if (!ok || !solveFourCoplanar(model, xy, &initial))
 			continue;
 		RefineResult r;
-		if (!refinePose(cam, target.points.data(), px.data(), n, initial, RefineOptions{}, &r))
+		if (!refinePose(cam, target.points.data(), px.data(), n, initial, RefineOptions{},
+				&r))
 			continue;
 		if (r.rms_px < best_rms) {
 			best_rms = r.rms_px;
@@ -109,8 +120,8 @@ bool dockposeSolve(const CameraModel &cam, const Target &target, const std::vect
 }
 
 /* OpenCV: SQPnP, then Levenberg-Marquardt on the reprojection error. */
-bool opencvSolve(const CameraIntrinsics &k, const Target &target, const std::vector<Eigen::Vector2d> &px,
-		 Pose *pose)
+bool opencvSolve(const CameraIntrinsics &k, const Target &target,
+		 const std::vector<Eigen::Vector2d> &px, Pose *pose)
 {
 	std::vector<cv::Point3d> obj;
 	std::vector<cv::Point2d> img;
@@ -159,7 +170,8 @@ void comparePnP(const Target &target, int trials, unsigned seed)
 			truth.t_mm = { lateral(rng) * z, lateral(rng) * z, z };
 			bool inside = true;
 			for (std::size_t i = 0; i < px.size(); ++i)
-				inside = inside && cam.project(truth.apply(target.points[i]), &px[i]) &&
+				inside = inside &&
+					 cam.project(truth.apply(target.points[i]), &px[i]) &&
 					 cam.inImage(px[i], 5.0);
 			if (inside)
 				break;
@@ -177,7 +189,8 @@ void comparePnP(const Target &target, int trials, unsigned seed)
 		dp_t.push_back(dp_ok ? (dp.t_mm - truth.t_mm).norm() : inf);
 		cv_rot.push_back(cv_ok ? rotationAngleDeg(ocv.R, truth.R) : inf);
 		cv_t.push_back(cv_ok ? (ocv.t_mm - truth.t_mm).norm() : inf);
-		if (dp_ok && cv_ok && rotationAngleDeg(dp.R, ocv.R) < 1e-3 && (dp.t_mm - ocv.t_mm).norm() < 1e-2)
+		if (dp_ok && cv_ok && rotationAngleDeg(dp.R, ocv.R) < 1e-3 &&
+		    (dp.t_mm - ocv.t_mm).norm() < 1e-2)
 			++same;
 	}
 	const Errors dp{ median(dp_rot), median(dp_t) };
@@ -185,8 +198,8 @@ void comparePnP(const Target &target, int trials, unsigned seed)
 	std::printf("%-6s %d trials: median rotation error dockpose %.4f deg, OpenCV %.4f deg; "
 		    "median translation error dockpose %.3f mm, OpenCV %.3f mm; "
 		    "failures dockpose %d, OpenCV %d; same minimum in %d\n",
-		    target.name, trials, dp.rot_deg, ocv.rot_deg, dp.trans_mm, ocv.trans_mm, dp_failed, cv_failed,
-		    same);
+		    target.name, trials, dp.rot_deg, ocv.rot_deg, dp.trans_mm, ocv.trans_mm,
+		    dp_failed, cv_failed, same);
 	EXPECT_LE(dp.rot_deg, 1.1 * ocv.rot_deg);
 	EXPECT_LE(dp.trans_mm, 1.1 * ocv.trans_mm);
 	EXPECT_LE(dp_failed, trials / 100);
@@ -210,7 +223,8 @@ TEST(CameraModelVsOpenCV, ProjectMatchesProjectPoints)
 			pts.emplace_back(lateral(rng) * z, lateral(rng) * z, z);
 		}
 		std::vector<cv::Point2d> ref;
-		cv::projectPoints(pts, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), cvCameraMatrix(k), cvDistortion(k), ref);
+		cv::projectPoints(pts, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), cvCameraMatrix(k),
+				  cvDistortion(k), ref);
 		for (std::size_t i = 0; i < pts.size(); ++i) {
 			Eigen::Vector2d uv;
 			ASSERT_TRUE(cam.project({ pts[i].x, pts[i].y, pts[i].z }, &uv));
@@ -227,10 +241,13 @@ TEST(CameraModelVsOpenCV, UndistortMatchesUndistortPoints)
 		std::vector<cv::Point2d> px;
 		for (int iy = 0; iy <= 16; ++iy)
 			for (int ix = 0; ix <= 16; ++ix)
-				px.emplace_back(-0.5 + k.width * ix / 16.0, -0.5 + k.height * iy / 16.0);
+				px.emplace_back(-0.5 + k.width * ix / 16.0,
+						-0.5 + k.height * iy / 16.0);
 		std::vector<cv::Point2d> ref;
-		cv::undistortPoints(px, ref, cvCameraMatrix(k), cvDistortion(k), cv::noArray(), cv::noArray(),
-				    cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 200, 1e-15));
+		cv::undistortPoints(
+			px, ref, cvCameraMatrix(k), cvDistortion(k), cv::noArray(), cv::noArray(),
+			cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 200,
+					 1e-15));
 		for (std::size_t i = 0; i < px.size(); ++i) {
 			Eigen::Vector2d xy;
 			ASSERT_TRUE(cam.pixelToNormalized({ px[i].x, px[i].y }, &xy));

@@ -1067,7 +1067,8 @@ TEST(RendererHard, ScrambledFramesMoveEveryLedByTheAskedShare)
 			/* Displaced 0.2-0.4 diameters in 3-D: at least the perpendicular share moves in the image. */
 			const Eigen::Vector2d shift = scrambled.led_px[i] - plain.led_px[i];
 			const double z = pose.apply(target.points_mm[i]).z();
-			EXPECT_LT(shift.norm(), 0.4 * diameter * k.fx / (z - 0.4 * diameter) + 1e-6) << "seed " << seed;
+			EXPECT_LT(shift.norm(), 0.4 * diameter * k.fx / (z - 0.4 * diameter) + 1e-6)
+				<< "seed " << seed;
 			shift_sum += shift.norm();
 			scale_sum += 0.3 * diameter * k.fx / z; /* the mean displacement, head on */
 		}
@@ -1434,7 +1435,8 @@ TEST(Evaluation, ScenariosTallyFaceCompleteAndTargetFreeFrames)
 	EXPECT_EQ(t.scenarios[static_cast<int>(Scenario::Scrambled)].frames, 0);
 	for (int s = 1; s < kScenarioCount; ++s) {
 		if (static_cast<Scenario>(s) != Scenario::Scrambled) {
-			EXPECT_GT(t.scenarios[s].frames, 3) << scenarioName(static_cast<Scenario>(s));
+			EXPECT_GT(t.scenarios[s].frames, 3)
+				<< scenarioName(static_cast<Scenario>(s));
 		}
 	}
 	EXPECT_EQ(t.total.frames, 120);

@@ -94,8 +94,8 @@ struct SpotFigures {
 };
 
 void run(const TargetModel &target, const CameraIntrinsics &cam, double range_min, double range_max,
-	 int frames, std::uint64_t seed, Figures *fig, double bloom = 0.0, SpotFigures *spots = nullptr,
-	 double gradient = RenderOptions{}.gradient)
+	 int frames, std::uint64_t seed, Figures *fig, double bloom = 0.0,
+	 SpotFigures *spots = nullptr, double gradient = RenderOptions{}.gradient)
 {
 	const CameraModel camera(cam);
 	FrameRenderer renderer(target, cam);
@@ -144,10 +144,12 @@ void run(const TargetModel &target, const CameraIntrinsics &cam, double range_mi
 				continue;
 			used |= 1ull << best;
 			const Blob &b = blobs[best];
-			if (spots && b.saturated_px > 0 && b.x_min > 0 && b.y_min > 0 && b.x_max + 1 < cam.width &&
-			    b.y_max + 1 < cam.height) {
-				const Eigen::Vector2d err = Eigen::Vector2d(b.u_px, b.v_px) - t.led_px[i];
-				const double ru = err.x() / std::sqrt(b.cov_uu_px2), rv = err.y() / std::sqrt(b.cov_vv_px2);
+			if (spots && b.saturated_px > 0 && b.x_min > 0 && b.y_min > 0 &&
+			    b.x_max + 1 < cam.width && b.y_max + 1 < cam.height) {
+				const Eigen::Vector2d err =
+					Eigen::Vector2d(b.u_px, b.v_px) - t.led_px[i];
+				const double ru = err.x() / std::sqrt(b.cov_uu_px2),
+					     rv = err.y() / std::sqrt(b.cov_vv_px2);
 				spots->ratio_sum += ru + rv;
 				spots->ratio_sum2 += ru * ru + rv * rv;
 				spots->err_sum += err.x() + err.y();
@@ -269,17 +271,19 @@ TEST(UncertaintyE2e, BloomedClippedSpotsAreUnbiasedAndTheirSigmaHonest)
 			      Case{ 3.0, 30.0 } }) {
 		Figures fig;
 		SpotFigures spots;
-		run(target.value, cam1456.value, 350.0, 2100.0, 200, 21 + static_cast<std::uint64_t>(c.bloom), &fig,
-		    c.bloom, &spots, c.gradient);
+		run(target.value, cam1456.value, 350.0, 2100.0, 200,
+		    21 + static_cast<std::uint64_t>(c.bloom), &fig, c.bloom, &spots, c.gradient);
 		char what[64];
 		std::snprintf(what, sizeof(what), "bloom %.0f, gradient %.0f", c.bloom, c.gradient);
 		report(what, fig);
-		std::printf("%s: %d clipped spots; std of centroid error/sigma %.3f, mean error %.4f px\n", what,
-			    spots.clipped, spots.ratioStd(), spots.meanErr());
+		std::printf(
+			"%s: %d clipped spots; std of centroid error/sigma %.3f, mean error %.4f px\n",
+			what, spots.clipped, spots.ratioStd(), spots.meanErr());
 		ASSERT_GE(spots.clipped, 400) << what;
 		EXPECT_GT(spots.ratioStd(), 0.7) << what;
 		EXPECT_LT(spots.ratioStd(), 1.4) << what;
-		EXPECT_LT(std::abs(spots.meanErr()), 0.02) << what; /* no bias over the gradient's directions */
+		EXPECT_LT(std::abs(spots.meanErr()), 0.02)
+			<< what; /* no bias over the gradient's directions */
 		ASSERT_GE(fig.poses, 150) << what;
 		for (int k = 0; k < 6; ++k) {
 			EXPECT_GT(fig.ratioStd(k), 0.7) << what << " axis " << k;

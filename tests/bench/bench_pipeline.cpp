@@ -55,7 +55,8 @@ const Fixture &fixture()
 			o.clutter_seed = 77; /* the scene stays where it is; the target moves */
 			RenderTruth truth;
 			Image img;
-			renderer.render(poseAt(x.camera, x.target, 1200.0 - 10.0 * i, { 8.0 - 0.2 * i, -10.0 + 0.3 * i, 5.0 },
+			renderer.render(poseAt(x.camera, x.target, 1200.0 - 10.0 * i,
+					       { 8.0 - 0.2 * i, -10.0 + 0.3 * i, 5.0 },
 					       0.45 + 0.002 * i, 0.5),
 					o, 1000 + i, &img, &truth);
 			x.frames.push_back(std::move(img));
@@ -151,9 +152,11 @@ void openCvPipeline(benchmark::State &state)
 	for (auto _ : state) {
 		const std::size_t k = i++ % f.frames.size();
 		const Image &img = f.frames[k];
-		const cv::Mat frame(img.height(), img.width(), CV_8UC1, const_cast<std::uint8_t *>(img.data()));
+		const cv::Mat frame(img.height(), img.width(), CV_8UC1,
+				    const_cast<std::uint8_t *>(img.data()));
 		cv::threshold(frame, binary, 60, 255, cv::THRESH_BINARY);
-		const int count = cv::connectedComponentsWithStats(binary, labels, stats, centroids, 8, CV_32S);
+		const int count = cv::connectedComponentsWithStats(binary, labels, stats, centroids,
+								   8, CV_32S);
 		/* Known correspondences: the centroid nearest each LED's true position. */
 		std::vector<cv::Point3d> obj;
 		std::vector<cv::Point2d> img_pts;
@@ -164,8 +167,10 @@ void openCvPipeline(benchmark::State &state)
 			int best = -1;
 			double best_d2 = 25.0;
 			for (int c = 1; c < count; ++c) {
-				const double dx = centroids.at<double>(c, 0) - truth.led_px[led].x();
-				const double dy = centroids.at<double>(c, 1) - truth.led_px[led].y();
+				const double dx =
+					centroids.at<double>(c, 0) - truth.led_px[led].x();
+				const double dy =
+					centroids.at<double>(c, 1) - truth.led_px[led].y();
 				if (dx * dx + dy * dy < best_d2) {
 					best_d2 = dx * dx + dy * dy;
 					best = c;
@@ -173,11 +178,13 @@ void openCvPipeline(benchmark::State &state)
 			}
 			if (best > 0) {
 				obj.push_back(object[led]);
-				img_pts.emplace_back(centroids.at<double>(best, 0), centroids.at<double>(best, 1));
+				img_pts.emplace_back(centroids.at<double>(best, 0),
+						     centroids.at<double>(best, 1));
 			}
 		}
 		cv::Vec3d rvec, tvec;
-		if (obj.size() >= 4 && cv::solvePnP(obj, img_pts, K, dist, rvec, tvec, false, cv::SOLVEPNP_SQPNP))
+		if (obj.size() >= 4 &&
+		    cv::solvePnP(obj, img_pts, K, dist, rvec, tvec, false, cv::SOLVEPNP_SQPNP))
 			++solved;
 		++n;
 		benchmark::DoNotOptimize(tvec);
@@ -202,7 +209,10 @@ public:
 } /* namespace */
 
 BENCHMARK(readFloor)->Repetitions(7)->ReportAggregatesOnly(true)->Unit(benchmark::kMicrosecond);
-BENCHMARK(pipelineTracking)->Repetitions(7)->ReportAggregatesOnly(true)->Unit(benchmark::kMicrosecond);
+BENCHMARK(pipelineTracking)
+	->Repetitions(7)
+	->ReportAggregatesOnly(true)
+	->Unit(benchmark::kMicrosecond);
 BENCHMARK(pipelineTrackingWholeFrame)
 	->Repetitions(7)
 	->ReportAggregatesOnly(true)
@@ -211,7 +221,10 @@ BENCHMARK(pipelineTrackingWindowsOnly)
 	->Repetitions(7)
 	->ReportAggregatesOnly(true)
 	->Unit(benchmark::kMicrosecond);
-BENCHMARK(pipelineColdSearch)->Repetitions(7)->ReportAggregatesOnly(true)->Unit(benchmark::kMicrosecond);
+BENCHMARK(pipelineColdSearch)
+	->Repetitions(7)
+	->ReportAggregatesOnly(true)
+	->Unit(benchmark::kMicrosecond);
 BENCHMARK(openCvPipeline)->Repetitions(7)->ReportAggregatesOnly(true)->Unit(benchmark::kMicrosecond);
 
 int main(int argc, char **argv)
@@ -222,12 +235,14 @@ int main(int argc, char **argv)
 	auto &m = reporter.median_us;
 	if (m.count("readFloor") && m.count("pipelineTracking") && m.count("openCvPipeline") &&
 	    m.count("pipelineColdSearch")) {
-		const double floor = m["readFloor"], track = m["pipelineTracking"], cold = m["pipelineColdSearch"],
-			     cv = m["openCvPipeline"];
-		std::printf("\nmedian per 1456x1088 frame: read floor %.1f us, dockpose tracking %.1f us, "
-			    "dockpose full search %.1f us, OpenCV %.1f us\n",
-			    floor, track, cold, cv);
-		std::printf("ratio dockpose(tracking)/read-floor: %.2f (goal <= 3)\n", track / floor);
+		const double floor = m["readFloor"], track = m["pipelineTracking"],
+			     cold = m["pipelineColdSearch"], cv = m["openCvPipeline"];
+		std::printf(
+			"\nmedian per 1456x1088 frame: read floor %.1f us, dockpose tracking %.1f us, "
+			"dockpose full search %.1f us, OpenCV %.1f us\n",
+			floor, track, cold, cv);
+		std::printf("ratio dockpose(tracking)/read-floor: %.2f (goal <= 3)\n",
+			    track / floor);
 		std::printf("ratio OpenCV/dockpose(tracking): %.2f (goal >= 3)\n", cv / track);
 		std::printf("ratio OpenCV/dockpose(full search): %.2f\n", cv / cold);
 		std::printf("dockpose tracking per frame: %.3f ms (goal <= 1 ms)\n", track / 1e3);

@@ -62,17 +62,36 @@ void *operator new[](std::size_t n)
 void *operator new(std::size_t n, std::align_val_t a)
 {
 	dockpose::test::countAllocation();
-	if (void *p = std::aligned_alloc(static_cast<std::size_t>(a), (n + static_cast<std::size_t>(a) - 1) &
-									      ~(static_cast<std::size_t>(a) - 1)))
+	if (void *p = std::aligned_alloc(static_cast<std::size_t>(a),
+					 (n + static_cast<std::size_t>(a) - 1) &
+						 ~(static_cast<std::size_t>(a) - 1)))
 		return p;
 	throw std::bad_alloc();
 }
-void operator delete(void *p) noexcept { std::free(p); }
-void operator delete[](void *p) noexcept { std::free(p); }
-void operator delete(void *p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void *p, std::size_t) noexcept { std::free(p); }
-void operator delete(void *p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void *p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void *p) noexcept
+{
+	std::free(p);
+}
+void operator delete[](void *p) noexcept
+{
+	std::free(p);
+}
+void operator delete(void *p, std::size_t) noexcept
+{
+	std::free(p);
+}
+void operator delete[](void *p, std::size_t) noexcept
+{
+	std::free(p);
+}
+void operator delete(void *p, std::align_val_t) noexcept
+{
+	std::free(p);
+}
+void operator delete(void *p, std::size_t, std::align_val_t) noexcept
+{
+	std::free(p);
+}
 
 /* malloc family: interpose and forward to the C library's implementation. */
 extern "C" {
@@ -95,4 +114,3 @@ void *realloc(void *p, std::size_t n)
 	return __libc_realloc(p, n);
 }
 }
-

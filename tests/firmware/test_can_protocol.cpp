@@ -6,7 +6,7 @@
  * canmatrix alone (tests/firmware/canmatrix_decode.py) and by
  * scripts/candecode, and every signal is compared with the C++ input.
  */
-#include <gtest/gtest.h>
+#include <sys/wait.h>
 
 #include <algorithm>
 #include <array>
@@ -20,9 +20,9 @@
 #include <random>
 #include <sstream>
 #include <string>
-#include <sys/wait.h>
 #include <vector>
 
+#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include "firmware/protocol/dockpose_can.h"
@@ -62,9 +62,15 @@ struct Report {
 class RandomReports
 {
 public:
-	explicit RandomReports(unsigned int seed) : rng_(seed) {}
+	explicit RandomReports(unsigned int seed)
+		: rng_(seed)
+	{
+	}
 
-	double uniform(double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng_); }
+	double uniform(double lo, double hi)
+	{
+		return std::uniform_real_distribution<double>(lo, hi)(rng_);
+	}
 	int integer(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng_); }
 
 	PoseData pose()
@@ -95,8 +101,9 @@ public:
 	StatusData status(bool pose_valid)
 	{
 		StatusData s;
-		s.state = pose_valid ? (integer(0, 1) ? SensorState::Tracking : SensorState::Degraded)
-				     : static_cast<SensorState>(integer(0, 5));
+		s.state = pose_valid
+				  ? (integer(0, 1) ? SensorState::Tracking : SensorState::Degraded)
+				  : static_cast<SensorState>(integer(0, 5));
 		s.enabled = integer(0, 1) != 0;
 		s.pose_valid = pose_valid;
 		s.tracked = integer(0, 1) != 0;
@@ -112,8 +119,14 @@ private:
 	std::mt19937 rng_;
 };
 
-unsigned int sequenceOf(const RawFrame &f) { return f.data[6] >> 4; }
-unsigned int aliveOf(const RawFrame &f) { return f.data[6] & 0x0f; }
+unsigned int sequenceOf(const RawFrame &f)
+{
+	return f.data[6] >> 4;
+}
+unsigned int aliveOf(const RawFrame &f)
+{
+	return f.data[6] & 0x0f;
+}
 
 /* A sigma goes out rounded up: decoded, it is at least what was sent (never more
  * certain) and less than one step above it (room for the decimal factor's rounding). */
@@ -166,7 +179,8 @@ Event feedAll(Decoder &dec, const RawFrame *frames, int n)
 TEST(Crc8J1850, CheckValueAndKnownVectors)
 {
 	const std::string check = "123456789";
-	EXPECT_EQ(crc8J1850(reinterpret_cast<const std::uint8_t *>(check.data()), check.size()), 0x4b);
+	EXPECT_EQ(crc8J1850(reinterpret_cast<const std::uint8_t *>(check.data()), check.size()),
+		  0x4b);
 
 	/* AUTOSAR SWS CRC Library's SAE J1850 table, recomputed independently
 	 * with a bitwise polynomial division in Python. */
@@ -185,7 +199,8 @@ TEST(Crc8J1850, CheckValueAndKnownVectors)
 		{ {}, 0x00 },
 	};
 	for (const Vector &v : vectors)
-		EXPECT_EQ(crc8J1850(v.data.data(), v.data.size()), v.crc) << "vector of " << v.data.size() << " bytes";
+		EXPECT_EQ(crc8J1850(v.data.data(), v.data.size()), v.crc)
+			<< "vector of " << v.data.size() << " bytes";
 }
 
 TEST(Crc8J1850, CoversTheIdentifier)
@@ -196,7 +211,7 @@ TEST(Crc8J1850, CoversTheIdentifier)
 	EXPECT_EQ(frameCrc(0x605, data), crc8J1850(bytes, 9));
 	EXPECT_NE(frameCrc(0x605, data), frameCrc(0x606, data));
 	EXPECT_NE(frameCrc(0x605, data), frameCrc(0x205, data));
-	data[7] = 0xaa;	/* the CRC byte itself is not covered */
+	data[7] = 0xaa; /* the CRC byte itself is not covered */
 	EXPECT_EQ(frameCrc(0x605, data), crc8J1850(bytes, 9));
 }
 
@@ -209,11 +224,11 @@ TEST(CanProtocol, FrameLayout)
 	st.pose_valid = true;
 	st.state = SensorState::Tracking;
 	PoseData pose;
-	pose.t_mm[0] = -1234.5;		/* raw -12345 = 0xcfc7 */
-	pose.t_mm[1] = 0.1;		/* raw 1 */
-	pose.t_mm[2] = 6553.5;		/* raw 65535 */
+	pose.t_mm[0] = -1234.5; /* raw -12345 = 0xcfc7 */
+	pose.t_mm[1] = 0.1; /* raw 1 */
+	pose.t_mm[2] = 6553.5; /* raw 65535 */
 	pose.frame_counter = 0x12345678;
-	pose.log10_nfa = -12.34;	/* raw -123 = 0xff85 */
+	pose.log10_nfa = -12.34; /* raw -123 = 0xff85 */
 	RawFrame out[kReportFrames];
 	ASSERT_EQ(enc.encodeReport(st, &pose, out), kReportFrames);
 
@@ -277,7 +292,8 @@ TEST(CanProtocol, RandomRoundTrip)
 				EXPECT_EQ(sequenceOf(out[k]), static_cast<unsigned int>(i) & 0x0f);
 				const Event ev = dec.feed(out[k]);
 				ASSERT_EQ(ev, k == n - 1 ? Event::Report : Event::None)
-					<< "frame " << k << " error " << frameErrorName(dec.lastError());
+					<< "frame " << k << " error "
+					<< frameErrorName(dec.lastError());
 			}
 			EXPECT_EQ(dec.sequence(), static_cast<unsigned int>(i) & 0x0f);
 			expectStatusNear(dec.status(), st);
@@ -292,8 +308,8 @@ TEST(CanProtocol, RandomRoundTrip)
 		const Decoder::Counters &c = dec.counters();
 		EXPECT_EQ(c.reports, 2000u);
 		EXPECT_EQ(c.valid_poses, static_cast<std::uint64_t>(valid));
-		EXPECT_EQ(c.incomplete_poses + c.crc_errors + c.length_errors + c.alive_gaps + c.stale_frames +
-				  c.unknown_ids,
+		EXPECT_EQ(c.incomplete_poses + c.crc_errors + c.length_errors + c.alive_gaps +
+				  c.stale_frames + c.unknown_ids,
 			  0u);
 	}
 }
@@ -354,10 +370,10 @@ TEST(CanProtocol, Saturation)
 	ASSERT_EQ(enc.encodeReport(st, &p, out), kReportFrames);
 	ASSERT_EQ(feedAll(dec, out, kReportFrames), Event::Report);
 	ASSERT_TRUE(dec.poseValid());
-	EXPECT_DOUBLE_EQ(dec.pose().log10_nfa, -3276.8);	/* at most that */
+	EXPECT_DOUBLE_EQ(dec.pose().log10_nfa, -3276.8); /* at most that */
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[0], 25.5);
-	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[1], 25.5);	/* NaN: unknown, sent as saturated */
-	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[2], 25.5);	/* negative: no sigma, unknown */
+	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[1], 25.5); /* NaN: unknown, sent as saturated */
+	EXPECT_DOUBLE_EQ(dec.pose().sigma_t_mm[2], 25.5); /* negative: no sigma, unknown */
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_rpy_deg[0], 2.55);
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_rpy_deg[1], 2.55);
 	EXPECT_DOUBLE_EQ(dec.pose().sigma_rpy_deg[2], 2.55);
@@ -368,8 +384,8 @@ TEST(CanProtocol, Saturation)
 	EXPECT_DOUBLE_EQ(dec.status().latency_ms, 655.35);
 
 	/* log10 NFA: NaN is unknown, sent as the top of the range (no evidence); +inf too. */
-	for (const double nfa : { std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
-				  4000.0 }) {
+	for (const double nfa : { std::numeric_limits<double>::quiet_NaN(),
+				  std::numeric_limits<double>::infinity(), 4000.0 }) {
 		p.log10_nfa = nfa;
 		ASSERT_EQ(enc.encodeReport(st, &p, out), kReportFrames);
 		ASSERT_EQ(feedAll(dec, out, kReportFrames), Event::Report);
@@ -417,7 +433,11 @@ TEST(CanProtocol, UnencodablePoseIsNotSentAsValid)
 		{ "Tz too large", { 0, 0, 6553.6 }, 1, 0, false },
 		{ "Tz NaN", { 0, 0, nan }, 1, 0, false },
 		{ "q NaN", { 0, 0, 1000 }, nan, 0, false },
-		{ "roll infinite", { 0, 0, 1000 }, 1, std::numeric_limits<double>::infinity(), false },
+		{ "roll infinite",
+		  { 0, 0, 1000 },
+		  1,
+		  std::numeric_limits<double>::infinity(),
+		  false },
 	};
 	Encoder enc;
 	Decoder dec;
@@ -546,8 +566,10 @@ TEST_F(CanRejection, EveryFlippedBitFailsTheCrc)
 	for (int frame = 0; frame < kReportFrames; ++frame) {
 		for (int bit = 0; bit < 64; ++bit) {
 			RawFrame f = frames_[frame];
-			f.data[static_cast<std::size_t>(bit / 8)] ^= static_cast<std::uint8_t>(1u << (bit % 8));
-			ASSERT_EQ(dec_.feed(f), Event::Rejected) << "frame " << frame << " bit " << bit;
+			f.data[static_cast<std::size_t>(bit / 8)] ^=
+				static_cast<std::uint8_t>(1u << (bit % 8));
+			ASSERT_EQ(dec_.feed(f), Event::Rejected)
+				<< "frame " << frame << " bit " << bit;
 			ASSERT_EQ(dec_.lastError(), FrameError::BadCrc);
 		}
 	}
@@ -560,7 +582,8 @@ TEST_F(CanRejection, EveryFlippedBitFailsTheCrc)
 
 TEST_F(CanRejection, WrongIdWithRightDataFailsTheCrc)
 {
-	for (std::uint32_t offset : { kTranslation, kQuatA, kQuatB, kAngles, kSigma, kQuality, kStatus }) {
+	for (std::uint32_t offset :
+	     { kTranslation, kQuatA, kQuatB, kAngles, kSigma, kQuality, kStatus }) {
 		RawFrame f = frames_[0];
 		if (offset == kTranslation)
 			f = frames_[1];
@@ -590,7 +613,8 @@ TEST_F(CanRejection, RepeatedFrameIsStale)
 	RawFrame next[kReportFrames];
 	ASSERT_EQ(enc_.encodeReport(st_, &pose_, next), kReportFrames);
 	for (RawFrame &f : next) {
-		f.data[6] = static_cast<std::uint8_t>((f.data[6] & 0xf0) | (frames_[0].data[6] & 0x0f));
+		f.data[6] =
+			static_cast<std::uint8_t>((f.data[6] & 0xf0) | (frames_[0].data[6] & 0x0f));
 		f.data[7] = frameCrc(f.id, f.data);
 	}
 	for (const RawFrame &f : next)
@@ -605,7 +629,7 @@ TEST_F(CanRejection, AliveGapsCountLostFrames)
 		f = enc_.encodeHeartbeat(HeartbeatData{});
 	EXPECT_EQ(dec_.feed(hb[0]), Event::Heartbeat);
 	EXPECT_EQ(dec_.feed(hb[1]), Event::Heartbeat);
-	EXPECT_EQ(dec_.feed(hb[4]), Event::Heartbeat);	/* two lost */
+	EXPECT_EQ(dec_.feed(hb[4]), Event::Heartbeat); /* two lost */
 	EXPECT_EQ(dec_.counters().alive_gaps, 2u);
 	EXPECT_EQ(dec_.lastError(), FrameError::None);
 
@@ -767,17 +791,22 @@ std::string candumpLine(double t, const RawFrame &f)
 	char buf[96];
 	int n = std::snprintf(buf, sizeof(buf), "(%.6f) can0 %03X#", t, f.id);
 	for (std::size_t i = 0; i < f.len; ++i)
-		n += std::snprintf(buf + n, sizeof(buf) - static_cast<std::size_t>(n), "%02X", f.data[i]);
+		n += std::snprintf(buf + n, sizeof(buf) - static_cast<std::size_t>(n), "%02X",
+				   f.data[i]);
 	return std::string(buf) + "\n";
 }
 
-double clampD(double v, double lo, double hi) { return std::min(std::max(v, lo), hi); }
+double clampD(double v, double lo, double hi)
+{
+	return std::min(std::max(v, lo), hi);
+}
 
 /* What Log10Nfa carries for a value: clamped to its range, NaN as its top. */
 double sentNfa(double v)
 {
 	const SignalLayout &s = layout::kLog10Nfa;
-	const double lo = static_cast<double>(s.rawMin()) * s.factor, hi = static_cast<double>(s.rawMax()) * s.factor;
+	const double lo = static_cast<double>(s.rawMin()) * s.factor,
+		     hi = static_cast<double>(s.rawMax()) * s.factor;
 	return std::isnan(v) ? hi : clampD(v, lo, hi);
 }
 
@@ -792,9 +821,11 @@ protected:
 		source_ = DOCKPOSE_SOURCE_DIR;
 		python_ = DOCKPOSE_PYTHON;
 		dbc_ = source_ + "/firmware/protocol/dockpose.dbc";
-		const RunResult mods = run(quote(python_) + " -c 'import can, canmatrix, canmatrix.formats'", dir_);
+		const RunResult mods = run(
+			quote(python_) + " -c 'import can, canmatrix, canmatrix.formats'", dir_);
 		ASSERT_EQ(mods.status, 0)
-			<< python_ << " cannot import python-can and canmatrix (Debian packages python3-can and "
+			<< python_
+			<< " cannot import python-can and canmatrix (Debian packages python3-can and "
 			<< "python3-canmatrix, installed by scripts/setup): " << mods.err;
 	}
 
@@ -871,10 +902,12 @@ protected:
 	{
 		char base_text[16];
 		std::snprintf(base_text, sizeof(base_text), "0x%x", base);
-		const RunResult r = run(quote(python_) + " " + quote(source_ + "/tests/firmware/canmatrix_decode.py") +
-						" --dbc " + quote(dbc_) + " --base-id " + base_text + " " +
-						quote(dir_ + "/log.log"),
-					dir_);
+		const RunResult r =
+			run(quote(python_) + " " +
+				    quote(source_ + "/tests/firmware/canmatrix_decode.py") +
+				    " --dbc " + quote(dbc_) + " --base-id " + base_text + " " +
+				    quote(dir_ + "/log.log"),
+			    dir_);
 		ASSERT_EQ(r.status, 0) << r.err;
 		const std::vector<nlohmann::json> objs = jsonLines(r.out);
 		ASSERT_EQ(objs.size(), frames_.size());
@@ -891,7 +924,9 @@ protected:
 			EXPECT_EQ(raw["AliveCounter"].get<unsigned int>(), aliveOf(f));
 			EXPECT_EQ(raw["Sequence"].get<unsigned int>(), sequenceOf(f));
 			EXPECT_EQ(raw["CRC"].get<unsigned int>(), f.data[7]);
-			auto val = [&](const char *name) { return s.at(name).get<double>(); };
+			auto val = [&](const char *name) {
+				return s.at(name).get<double>();
+			};
 			const std::string msg = o["message"].get<std::string>();
 			const std::uint32_t offset = f.id - base;
 			const Report &r_in = reports_[std::min(report, reports_.size() - 1)];
@@ -913,7 +948,8 @@ protected:
 			case kQuatB:
 				ASSERT_EQ(msg, "DP_QuatB");
 				EXPECT_NEAR(val("Qz"), p.q[3], kTolQ);
-				EXPECT_EQ(raw["FrameCounter"].get<std::uint32_t>(), p.frame_counter);
+				EXPECT_EQ(raw["FrameCounter"].get<std::uint32_t>(),
+					  p.frame_counter);
 				break;
 			case kAngles:
 				ASSERT_EQ(msg, "DP_Angles");
@@ -926,8 +962,12 @@ protected:
 				const char *t_names[3] = { "SigmaTx", "SigmaTy", "SigmaTz" };
 				const char *r_names[3] = { "SigmaRoll", "SigmaPan", "SigmaTilt" };
 				for (int k = 0; k < 3; ++k) {
-					expectSigmaSent(val(t_names[k]), clampD(p.sigma_t_mm[k], 0, 25.5), kStepSigmaT);
-					expectSigmaSent(val(r_names[k]), clampD(p.sigma_rpy_deg[k], 0, 2.55), kStepSigmaDeg);
+					expectSigmaSent(val(t_names[k]),
+							clampD(p.sigma_t_mm[k], 0, 25.5),
+							kStepSigmaT);
+					expectSigmaSent(val(r_names[k]),
+							clampD(p.sigma_rpy_deg[k], 0, 2.55),
+							kStepSigmaDeg);
 				}
 				break;
 			}
@@ -943,11 +983,13 @@ protected:
 				EXPECT_EQ((raw["Enabled"].get<int>() != 0), st.enabled);
 				EXPECT_EQ((raw["PoseValid"].get<int>() != 0), r_in.with_pose);
 				EXPECT_EQ((raw["Tracked"].get<int>() != 0), st.tracked);
-				EXPECT_EQ(raw["StrobeMode"].get<int>(), static_cast<int>(st.strobe));
+				EXPECT_EQ(raw["StrobeMode"].get<int>(),
+					  static_cast<int>(st.strobe));
 				EXPECT_EQ(raw["LedsUsed"].get<int>(), st.leds_used);
 				EXPECT_NEAR(val("RmsPx"), clampD(st.rms_px, 0, 2.55), kTolRms);
 				EXPECT_EQ(raw["FaultBits"].get<int>(), st.faults);
-				EXPECT_NEAR(val("LatencyMs"), clampD(st.latency_ms, 0, 655.35), kTolLatency);
+				EXPECT_NEAR(val("LatencyMs"), clampD(st.latency_ms, 0, 655.35),
+					    kTolLatency);
 				EXPECT_EQ(sequenceOf(f), report & 0x0f);
 				++report;
 				break;
@@ -989,10 +1031,11 @@ protected:
 	{
 		char base_text[16];
 		std::snprintf(base_text, sizeof(base_text), "0x%x", base);
-		const RunResult r = run(quote(python_) + " " + quote(source_ + "/scripts/candecode") +
-						" --json --strict --base-id " + base_text + " --log " +
-						quote(dir_ + "/log.log"),
-					dir_);
+		const RunResult r =
+			run(quote(python_) + " " + quote(source_ + "/scripts/candecode") +
+				    " --json --strict --base-id " + base_text + " --log " +
+				    quote(dir_ + "/log.log"),
+			    dir_);
 		ASSERT_EQ(r.status, 0) << r.err;
 		const std::vector<nlohmann::json> objs = jsonLines(r.out);
 		ASSERT_EQ(objs.size(), reports_.size());
@@ -1004,8 +1047,10 @@ protected:
 			EXPECT_EQ(o["state"].get<std::string>(), sensorStateName(in.status.state));
 			EXPECT_EQ(o["valid"].get<bool>(), in.with_pose);
 			EXPECT_EQ(o["leds"].get<int>(), in.status.leds_used);
-			EXPECT_NEAR(o["rms_px"].get<double>(), clampD(in.status.rms_px, 0, 2.55), kTolRms);
-			EXPECT_NEAR(o["latency_ms"].get<double>(), clampD(in.status.latency_ms, 0, 655.35), kTolLatency);
+			EXPECT_NEAR(o["rms_px"].get<double>(), clampD(in.status.rms_px, 0, 2.55),
+				    kTolRms);
+			EXPECT_NEAR(o["latency_ms"].get<double>(),
+				    clampD(in.status.latency_ms, 0, 655.35), kTolLatency);
 			EXPECT_NEAR(o["timestamp"].get<double>(), report_times_[i], 1e-5);
 			std::vector<std::string> faults;
 			for (unsigned int b = 0; b < 8; ++b)
@@ -1023,10 +1068,10 @@ protected:
 			for (std::size_t k = 0; k < 3; ++k) {
 				EXPECT_NEAR(o["t_mm"][k].get<double>(), p.t_mm[k], kTolT);
 				EXPECT_NEAR(o["rpy_deg"][k].get<double>(), p.rpy_deg[k], kTolDeg);
-				expectSigmaSent(o["sigma_t_mm"][k].get<double>(), clampD(p.sigma_t_mm[k], 0, 25.5),
-						kStepSigmaT);
-				expectSigmaSent(o["sigma_rpy_deg"][k].get<double>(), clampD(p.sigma_rpy_deg[k], 0, 2.55),
-						kStepSigmaDeg);
+				expectSigmaSent(o["sigma_t_mm"][k].get<double>(),
+						clampD(p.sigma_t_mm[k], 0, 25.5), kStepSigmaT);
+				expectSigmaSent(o["sigma_rpy_deg"][k].get<double>(),
+						clampD(p.sigma_rpy_deg[k], 0, 2.55), kStepSigmaDeg);
 			}
 			for (std::size_t k = 0; k < 4; ++k)
 				EXPECT_NEAR(o["q"][k].get<double>(), p.q[k], kTolQ);
@@ -1059,7 +1104,8 @@ TEST_F(CanToolsTest, CanmatrixAndCandecodeAgreeWithTheEncoder)
 /* Every SignalLayout of the header is its SG_ line in the DBC, in the message of its offset. */
 TEST(CanProtocol, SignalLayoutsAreTheDbcs)
 {
-	const std::string dbc_path = std::string(DOCKPOSE_SOURCE_DIR) + "/firmware/protocol/dockpose.dbc";
+	const std::string dbc_path =
+		std::string(DOCKPOSE_SOURCE_DIR) + "/firmware/protocol/dockpose.dbc";
 	const std::string dbc = readFile(dbc_path);
 	struct Named {
 		const char *name;
@@ -1080,8 +1126,9 @@ TEST(CanProtocol, SignalLayoutsAreTheDbcs)
 		char sign = 0;
 		double factor = 0, offset = 1, lo = 0, hi = 0;
 		const std::string line = dbc.substr(at, dbc.find('\n', at) - at);
-		ASSERT_EQ(std::sscanf(line.c_str() + line.find(':') + 1, " %u|%u@1%c (%lf,%lf) [%lf|%lf]", &start, &length,
-				      &sign, &factor, &offset, &lo, &hi),
+		ASSERT_EQ(std::sscanf(line.c_str() + line.find(':') + 1,
+				      " %u|%u@1%c (%lf,%lf) [%lf|%lf]", &start, &length, &sign,
+				      &factor, &offset, &lo, &hi),
 			  7)
 			<< line;
 		EXPECT_EQ(start, n.layout.start_bit);
@@ -1103,8 +1150,8 @@ TEST_F(CanToolsTest, OtherBaseIdIsRemapped)
 	checkCanmatrix(0x520);
 	checkCandecode(0x520);
 	/* Read as base 0x300 the frames are not ours: no report at all. */
-	const RunResult r = run(quote(python_) + " " + quote(source_ + "/scripts/candecode") + " --json --log " +
-					quote(dir_ + "/log.log"),
+	const RunResult r = run(quote(python_) + " " + quote(source_ + "/scripts/candecode") +
+					" --json --log " + quote(dir_ + "/log.log"),
 				dir_);
 	EXPECT_EQ(r.status, 0) << r.err;
 	EXPECT_TRUE(r.out.empty()) << r.out;
@@ -1133,11 +1180,13 @@ TEST_F(CanToolsTest, CandecodeFindsCorruptionLikeTheDecoder)
 		}
 		return frames_.size();
 	};
-	const std::size_t quat = lineOf(2, kQuatA), angles = lineOf(17, kAngles), status = lineOf(10, kStatus);
+	const std::size_t quat = lineOf(2, kQuatA), angles = lineOf(17, kAngles),
+			  status = lineOf(10, kStatus);
 	ASSERT_LT(quat, lines.size());
 	ASSERT_LT(angles, lines.size());
 	ASSERT_LT(status, lines.size());
-	lines[quat][lines[quat].size() - 4] = lines[quat][lines[quat].size() - 4] == '0' ? '1' : '0';
+	lines[quat][lines[quat].size() - 4] = lines[quat][lines[quat].size() - 4] == '0' ? '1'
+											 : '0';
 	lines[angles] = "";
 	lines.insert(lines.begin() + static_cast<std::ptrdiff_t>(status) + 1, lines[status]);
 	lines.insert(lines.begin(), "this is not a candump line\n");
@@ -1161,17 +1210,18 @@ TEST_F(CanToolsTest, CandecodeFindsCorruptionLikeTheDecoder)
 			f.id = id;
 			f.len = 8;
 			for (std::size_t k = 0; k < 8; ++k)
-				f.data[k] = static_cast<std::uint8_t>(std::stoul(std::string(data + 2 * k, 2), nullptr, 16));
+				f.data[k] = static_cast<std::uint8_t>(
+					std::stoul(std::string(data + 2 * k, 2), nullptr, 16));
 			dec.feed(f);
 		}
 	}
 	EXPECT_EQ(dec.counters().crc_errors, 1u);
 	EXPECT_EQ(dec.counters().stale_frames, 1u);
-	EXPECT_EQ(dec.counters().alive_gaps, 2u);	/* the corrupted and the dropped frame */
+	EXPECT_EQ(dec.counters().alive_gaps, 2u); /* the corrupted and the dropped frame */
 	EXPECT_EQ(dec.counters().incomplete_poses, 2u);
 
-	const std::string cmd = quote(python_) + " " + quote(source_ + "/scripts/candecode") + " --json --log " +
-				quote(dir_ + "/bad.log");
+	const std::string cmd = quote(python_) + " " + quote(source_ + "/scripts/candecode") +
+				" --json --log " + quote(dir_ + "/bad.log");
 	RunResult r = run(cmd, dir_);
 	ASSERT_EQ(r.status, 0) << r.err;
 	const std::vector<nlohmann::json> objs = jsonLines(r.out);
@@ -1183,8 +1233,10 @@ TEST_F(CanToolsTest, CandecodeFindsCorruptionLikeTheDecoder)
 	}
 	EXPECT_EQ(valid, dec.counters().valid_poses);
 	EXPECT_EQ(incomplete, dec.counters().incomplete_poses);
-	EXPECT_NE(r.err.find("CRC 1, length 0, alive gaps 2 (frames lost), stale 1, malformed log lines 1"),
-		  std::string::npos)
+	EXPECT_NE(
+		r.err.find(
+			"CRC 1, length 0, alive gaps 2 (frames lost), stale 1, malformed log lines 1"),
+		std::string::npos)
 		<< r.err;
 	EXPECT_NE(r.err.find(":1: not a candump -l line"), std::string::npos) << r.err;
 
@@ -1196,14 +1248,16 @@ TEST_F(CanToolsTest, CandecodeFindsCorruptionLikeTheDecoder)
 	EXPECT_EQ(jsonLines(r.out).size(), 5u);
 
 	/* Text output: one line per report and the summary. */
-	r = run(quote(python_) + " " + quote(source_ + "/scripts/candecode") + " --heartbeats --log " +
-			quote(dir_ + "/log.log"),
+	r = run(quote(python_) + " " + quote(source_ + "/scripts/candecode") +
+			" --heartbeats --log " + quote(dir_ + "/log.log"),
 		dir_);
 	ASSERT_EQ(r.status, 0) << r.err;
 	EXPECT_NE(r.out.find("seq  0 frame "), std::string::npos) << r.out;
 	EXPECT_NE(r.out.find(" mm  rpy=("), std::string::npos) << r.out;
 	EXPECT_NE(r.out.find("heartbeat  up 0 s"), std::string::npos) << r.out;
-	EXPECT_NE(r.out.find("command  enable  mode SEARCH_ONLY  strobe ALTERNATE"), std::string::npos) << r.out;
+	EXPECT_NE(r.out.find("command  enable  mode SEARCH_ONLY  strobe ALTERNATE"),
+		  std::string::npos)
+		<< r.out;
 	EXPECT_NE(r.out.find("reports 40 at 60.0 Hz"), std::string::npos) << r.out;
 }
 
@@ -1219,11 +1273,15 @@ TEST_F(CanToolsTest, CandecodeUsageAndIoErrors)
 		std::ofstream(dir_ + "/bad.dbc") << "this is not a DBC\nBO_ 1 X: 8 Y\n";
 		std::ofstream(dir_ + "/junk.log") << "hello world\nnot a log\n";
 	}
-	r = run(tool + " --dbc " + quote(dir_ + "/bad.dbc") + " --log " + quote(dir_ + "/empty.log"), dir_);
+	r = run(tool + " --dbc " + quote(dir_ + "/bad.dbc") + " --log " +
+			quote(dir_ + "/empty.log"),
+		dir_);
 	EXPECT_EQ(r.status, 2);
 	EXPECT_NE(r.err.find("bad DBC"), std::string::npos) << r.err;
 
-	r = run(tool + " --dbc " + quote(dir_ + "/nope.dbc") + " --log " + quote(dir_ + "/empty.log"), dir_);
+	r = run(tool + " --dbc " + quote(dir_ + "/nope.dbc") + " --log " +
+			quote(dir_ + "/empty.log"),
+		dir_);
 	EXPECT_EQ(r.status, 2);
 	EXPECT_NE(r.err.find("nope.dbc: no such DBC file"), std::string::npos) << r.err;
 

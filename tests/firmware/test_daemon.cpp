@@ -8,8 +8,6 @@
  * No timing assertions on the machine's speed: rates are compared with the
  * camera's own frame count, and poses with the trajectory's truth.
  */
-#include <gtest/gtest.h>
-
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -19,6 +17,7 @@
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <gtest/gtest.h>
 
 #include "board/sim/sim_board.h"
 #include "firmware/config.h"
@@ -36,7 +35,8 @@ using namespace std::chrono_literals;
 
 BoardConfig simConfig()
 {
-	ConfigResult loaded = loadBoardConfig(std::string(DOCKPOSE_SOURCE_DIR) + "/board/sim/board.json");
+	ConfigResult loaded =
+		loadBoardConfig(std::string(DOCKPOSE_SOURCE_DIR) + "/board/sim/board.json");
 	EXPECT_TRUE(loaded.ok()) << (loaded.errors.empty() ? "" : loaded.errors.front());
 	BoardConfig config = loaded.config;
 	config.can.backend = "loopback";
@@ -50,12 +50,13 @@ BoardConfig simConfig()
 class Rig
 {
 public:
-	explicit Rig(const BoardConfig &config, std::FILE *log = nullptr) : config_(config)
+	explicit Rig(const BoardConfig &config, std::FILE *log = nullptr)
+		: config_(config)
 	{
 		hub_ = std::make_shared<hal::LoopbackHub>();
 		board::Backends b;
-		const hal::Status wired =
-			board::wireSimulated(config, std::make_unique<hal::LoopbackCanBus>(hub_, "sensor"), &b);
+		const hal::Status wired = board::wireSimulated(
+			config, std::make_unique<hal::LoopbackCanBus>(hub_, "sensor"), &b);
 		EXPECT_TRUE(wired.isOk()) << wired.message();
 		/* The sim wiring's types, as board.json's camera.backend is "synthetic". */
 		strobe_ = static_cast<hal::RecordingStrobe *>(b.strobe.get());
@@ -66,13 +67,13 @@ public:
 
 		controller_ = std::make_unique<hal::LoopbackCanBus>(hub_, "controller");
 		const hal::CanFilter all{ 0, 0, false };
-		EXPECT_TRUE(controller_->open(std::span<const hal::CanFilter>(&all, 1), hal::CanOptions{}).isOk());
+		EXPECT_TRUE(
+			controller_
+				->open(std::span<const hal::CanFilter>(&all, 1), hal::CanOptions{})
+				.isOk());
 	}
 
-	~Rig()
-	{
-		stop();
-	}
+	~Rig() { stop(); }
 
 	void start(double run_for_s = 0.0)
 	{
@@ -101,11 +102,12 @@ public:
 			raw.id = f.id;
 			raw.len = f.len;
 			for (int i = 0; i < 8; ++i)
-				raw.data[static_cast<std::size_t>(i)] = f.data[static_cast<std::size_t>(i)];
+				raw.data[static_cast<std::size_t>(i)] =
+					f.data[static_cast<std::size_t>(i)];
 			switch (decoder_.feed(raw)) {
 			case can::Decoder::Event::Report:
-				reports_.push_back({ decoder_.status(), decoder_.poseValid(), decoder_.pose(),
-						     hal::monotonicNs() });
+				reports_.push_back({ decoder_.status(), decoder_.poseValid(),
+						     decoder_.pose(), hal::monotonicNs() });
 				break;
 			case can::Decoder::Event::Heartbeat:
 				heartbeats_.push_back(decoder_.heartbeat());
@@ -177,8 +179,9 @@ void expectAccurate(const can::PoseData &pose, const Pose &truth, int *checked)
 	const Eigen::Vector3d t(pose.t_mm[0], pose.t_mm[1], pose.t_mm[2]);
 	const double range_mm = truth.t_mm.norm();
 	const double trans_err_mm = (t - truth.t_mm).norm();
-	EXPECT_LE(trans_err_mm, std::max(5.0, 0.02 * range_mm)) << "frame " << pose.frame_counter << " t " << t.transpose()
-							       << " truth " << truth.t_mm.transpose();
+	EXPECT_LE(trans_err_mm, std::max(5.0, 0.02 * range_mm))
+		<< "frame " << pose.frame_counter << " t " << t.transpose() << " truth "
+		<< truth.t_mm.transpose();
 	const Eigen::Quaterniond q(pose.q[0], pose.q[1], pose.q[2], pose.q[3]);
 	const Eigen::Quaterniond qt(truth.R);
 	const double rot_err_deg = q.normalized().angularDistance(qt) * 180.0 / M_PI;
@@ -229,33 +232,44 @@ TEST(Daemon, CommandFramesChangeModeStrobeAndEnable)
 	/* The waits return as soon as they are met; their limits leave room for a
 	 * loaded 2-core machine (a cold search per frame in search-only mode). */
 	rig.start();
-	ASSERT_TRUE(rig.waitFor([&] {
-		return !rig.reports_.empty() && rig.reports_.back().status.state == can::SensorState::Tracking;
-	}, 30s)) << "never tracked";
+	ASSERT_TRUE(rig.waitFor(
+		[&] {
+			return !rig.reports_.empty() &&
+			       rig.reports_.back().status.state == can::SensorState::Tracking;
+		},
+		30s))
+		<< "never tracked";
 
 	can::CommandData alternate;
 	alternate.strobe = can::StrobeMode::Alternate;
 	alternate.mode = can::TrackMode::SearchOnly;
 	rig.sendCommand(alternate);
 	/* In alternate mode poses come from lit-minus-unlit frames: wait for valid poses there. */
-	ASSERT_TRUE(rig.waitFor([&] {
-		int n = 0;
-		for (const auto &r : rig.reports_)
-			n += r.status.strobe == can::StrobeMode::Alternate && r.pose_valid;
-		return n >= 10;
-	}, 30s)) << "no valid poses in alternate mode";
+	ASSERT_TRUE(rig.waitFor(
+		[&] {
+			int n = 0;
+			for (const auto &r : rig.reports_)
+				n += r.status.strobe == can::StrobeMode::Alternate && r.pose_valid;
+			return n >= 10;
+		},
+		30s))
+		<< "no valid poses in alternate mode";
 	EXPECT_GT(rig.daemon_->stats().frames_unlit, 5u);
-	ASSERT_TRUE(rig.waitFor([&] {
-		return !rig.heartbeats_.empty() && rig.heartbeats_.back().mode == can::TrackMode::SearchOnly &&
-		       rig.heartbeats_.back().strobe == can::StrobeMode::Alternate;
-	}, 3s));
+	ASSERT_TRUE(rig.waitFor(
+		[&] {
+			return !rig.heartbeats_.empty() &&
+			       rig.heartbeats_.back().mode == can::TrackMode::SearchOnly &&
+			       rig.heartbeats_.back().strobe == can::StrobeMode::Alternate;
+		},
+		3s));
 	/* Alternate: the strobe switched many times, in pulses. */
 	EXPECT_GT(rig.strobe_->events().size(), 10u);
 
 	can::CommandData disable;
 	disable.enable = false;
 	rig.sendCommand(disable);
-	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && !rig.reports_.back().status.enabled; }, 3s));
+	ASSERT_TRUE(rig.waitFor(
+		[&] { return !rig.reports_.empty() && !rig.reports_.back().status.enabled; }, 3s));
 	std::this_thread::sleep_for(200ms);
 	rig.drain();
 	EXPECT_FALSE(rig.reports_.back().pose_valid);
@@ -271,14 +285,18 @@ TEST(Daemon, CommandFramesChangeModeStrobeAndEnable)
 		f.data[static_cast<std::size_t>(i)] = bad.data[static_cast<std::size_t>(i)];
 	rig.controller_->send(f);
 	rig.controller_->poll();
-	ASSERT_TRUE(rig.waitFor([&] {
-		return !rig.reports_.empty() && (rig.reports_.back().status.faults & can::fault::kCommandRejected);
-	}, 3s));
+	ASSERT_TRUE(rig.waitFor(
+		[&] {
+			return !rig.reports_.empty() &&
+			       (rig.reports_.back().status.faults & can::fault::kCommandRejected);
+		},
+		3s));
 	EXPECT_FALSE(rig.daemon_->enabled()) << "a rejected command must change nothing";
 
 	can::CommandData enable;
 	rig.sendCommand(enable);
-	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 30s));
+	ASSERT_TRUE(rig.waitFor(
+		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 30s));
 	rig.stop();
 	EXPECT_GE(rig.daemon_->stats().commands, 3u);
 	EXPECT_GE(rig.daemon_->stats().commands_rejected, 1u);
@@ -291,14 +309,19 @@ TEST(Daemon, CameraStallReportsFaultAndSwitchesTheLedOff)
 	config.camera.stall_timeout_ms = 200;
 	Rig rig(config);
 	rig.start();
-	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+	ASSERT_TRUE(rig.waitFor(
+		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
 	EXPECT_TRUE(rig.strobe_->isOn());
 
 	rig.camera_->setStall(true);
-	ASSERT_TRUE(rig.waitFor([&] {
-		return !rig.reports_.empty() && rig.reports_.back().status.state == can::SensorState::Fault &&
-		       (rig.reports_.back().status.faults & can::fault::kCameraStall);
-	}, 5s)) << "no fault status during the stall";
+	ASSERT_TRUE(rig.waitFor(
+		[&] {
+			return !rig.reports_.empty() &&
+			       rig.reports_.back().status.state == can::SensorState::Fault &&
+			       (rig.reports_.back().status.faults & can::fault::kCameraStall);
+		},
+		5s))
+		<< "no fault status during the stall";
 	EXPECT_FALSE(rig.reports_.back().pose_valid);
 	EXPECT_FALSE(rig.strobe_->isOn()) << "the LED must go off while the camera stalls";
 	/* Status keeps coming during the stall. */
@@ -308,7 +331,8 @@ TEST(Daemon, CameraStallReportsFaultAndSwitchesTheLedOff)
 	EXPECT_GT(rig.reports_.size(), during);
 
 	rig.camera_->setStall(false);
-	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s))
+	ASSERT_TRUE(rig.waitFor(
+		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s))
 		<< "no recovery after the stall";
 	EXPECT_TRUE(rig.strobe_->isOn());
 	rig.stop();
@@ -322,7 +346,8 @@ TEST(Daemon, FullCanQueueDropsAndCountsWhileTheLoopKeepsRate)
 	config.can.tx_queue_depth = 8;
 	Rig rig(config);
 	rig.start();
-	ASSERT_TRUE(rig.waitFor([&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+	ASSERT_TRUE(rig.waitFor(
+		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
 
 	const std::uint64_t frames_before = rig.daemon_->stats().frames;
 	const Pose before_pose = rig.camera_->truthAt(0);
@@ -333,9 +358,13 @@ TEST(Daemon, FullCanQueueDropsAndCountsWhileTheLoopKeepsRate)
 	rig.hub_->setBlocked(false);
 	/* The loop went on at the camera's rate: frames kept being processed while nothing left. */
 	EXPECT_GT(frames_blocked, 30u) << "the frame loop stalled behind a full CAN queue";
-	ASSERT_TRUE(rig.waitFor([&] {
-		return !rig.reports_.empty() && (rig.reports_.back().status.faults & can::fault::kCanTxOverflow);
-	}, 3s)) << "the overflow was not reported";
+	ASSERT_TRUE(rig.waitFor(
+		[&] {
+			return !rig.reports_.empty() &&
+			       (rig.reports_.back().status.faults & can::fault::kCanTxOverflow);
+		},
+		3s))
+		<< "the overflow was not reported";
 	rig.stop();
 	EXPECT_GT(rig.daemon_->stats().can_send_drops, 0u);
 }

@@ -5,14 +5,14 @@
  * loopback CAN) runs for a while, then every operator new / malloc in the
  * whole process is counted over a window of about a second of frames.
  */
-#include <gtest/gtest.h>
-
 #include <atomic>
 #include <chrono>
 #include <cstdlib>
 #include <memory>
 #include <new>
 #include <thread>
+
+#include <gtest/gtest.h>
 
 #include "../common/counting_allocator.h"
 #include "board/sim/sim_board.h"
@@ -41,7 +41,8 @@ TEST(DaemonNoAlloc, CountingHooksSeeEveryThread)
 
 TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
 {
-	ConfigResult loaded = loadBoardConfig(std::string(DOCKPOSE_SOURCE_DIR) + "/board/sim/board.json");
+	ConfigResult loaded =
+		loadBoardConfig(std::string(DOCKPOSE_SOURCE_DIR) + "/board/sim/board.json");
 	ASSERT_TRUE(loaded.ok());
 	BoardConfig config = loaded.config;
 	config.systemd.notify = false;
@@ -49,7 +50,9 @@ TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
 
 	auto hub = std::make_shared<hal::LoopbackHub>();
 	board::Backends b;
-	ASSERT_TRUE(board::wireSimulated(config, std::make_unique<hal::LoopbackCanBus>(hub, "sensor"), &b).isOk());
+	ASSERT_TRUE(board::wireSimulated(config,
+					 std::make_unique<hal::LoopbackCanBus>(hub, "sensor"), &b)
+			    .isOk());
 
 	std::FILE *log = std::tmpfile();
 	Daemon daemon(config, std::move(b), log);

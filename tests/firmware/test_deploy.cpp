@@ -9,8 +9,8 @@
  * (uname -m, /etc/os-release, systemctl is-active) as the FAKE_* variables say.
  */
 
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -20,9 +20,10 @@
 #include <regex>
 #include <sstream>
 #include <string>
-#include <sys/wait.h>
-#include <unistd.h>
 #include <vector>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 
 namespace {
 
@@ -31,8 +32,8 @@ using ::testing::HasSubstr;
 using ::testing::Not;
 
 struct ShellResult {
-	int status = -1;	/* exit status, or -1 when the command did not exit normally */
-	std::string output;	/* stdout and stderr, interleaved */
+	int status = -1; /* exit status, or -1 when the command did not exit normally */
+	std::string output; /* stdout and stderr, interleaved */
 };
 
 std::string shellQuote(const std::string &s)
@@ -86,7 +87,8 @@ std::vector<std::string> commandLines(const std::string &output)
 }
 
 /* Index of the first line at or after `from` that contains every one of `parts`, or -1. */
-int findLine(const std::vector<std::string> &text, std::initializer_list<std::string> parts, int from = 0)
+int findLine(const std::vector<std::string> &text, std::initializer_list<std::string> parts,
+	     int from = 0)
 {
 	for (size_t i = static_cast<size_t>(from); i < text.size(); i++) {
 		bool all = true;
@@ -103,8 +105,9 @@ void writeFile(const fs::path &path, const std::string &text, bool executable = 
 	fs::create_directories(path.parent_path());
 	std::ofstream(path) << text;
 	if (executable)
-		fs::permissions(path, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec |
-				      fs::perms::others_read | fs::perms::others_exec);
+		fs::permissions(path, fs::perms::owner_all | fs::perms::group_read |
+					      fs::perms::group_exec | fs::perms::others_read |
+					      fs::perms::others_exec);
 }
 
 class Deploy : public ::testing::Test
@@ -112,7 +115,8 @@ class Deploy : public ::testing::Test
 protected:
 	void SetUp() override
 	{
-		std::string pattern = (fs::temp_directory_path() / "dockpose-deploy-XXXXXX").string();
+		std::string pattern =
+			(fs::temp_directory_path() / "dockpose-deploy-XXXXXX").string();
 		ASSERT_NE(mkdtemp(pattern.data()), nullptr);
 		tmp_ = pattern;
 		log_ = tmp_ / "remote.log";
@@ -145,8 +149,11 @@ echo "${states[$i]}"
 )",
 			  true);
 		writeFile(tmp_ / "remote/sleep", "#!/bin/bash\nexit 0\n", true);
-		writeFile(tmp_ / "bin/scp", "#!/bin/bash\nprintf 'scp %s\\n' \"$*\" >> \"$FAKE_LOG\"\n", true);
-		writeFile(tmp_ / "bin/cmake", "#!/bin/bash\nprintf 'cmake %s\\n' \"$*\" >> \"$FAKE_LOG\"\nexit 1\n", true);
+		writeFile(tmp_ / "bin/scp",
+			  "#!/bin/bash\nprintf 'scp %s\\n' \"$*\" >> \"$FAKE_LOG\"\n", true);
+		writeFile(tmp_ / "bin/cmake",
+			  "#!/bin/bash\nprintf 'cmake %s\\n' \"$*\" >> \"$FAKE_LOG\"\nexit 1\n",
+			  true);
 	}
 
 	void TearDown() override
@@ -159,14 +166,16 @@ echo "${states[$i]}"
 	fs::path makeDeb(const std::string &arch, const std::vector<std::string> &boards)
 	{
 		fs::path root = tmp_ / ("root-" + arch);
-		writeFile(root / "DEBIAN/control",
-			  "Package: dockpose\nVersion: 0.1.0\nArchitecture: " + arch +
-				  "\nMaintainer: test <test@example.org>\nDescription: fake dockpose package\n");
+		writeFile(
+			root / "DEBIAN/control",
+			"Package: dockpose\nVersion: 0.1.0\nArchitecture: " + arch +
+				"\nMaintainer: test <test@example.org>\nDescription: fake dockpose package\n");
 		for (const std::string &board : boards)
 			writeFile(root / "etc/dockpose/boards" / board / "board.json", "{}\n");
 		fs::path deb = tmp_ / ("dockpose_0.1.0_" + arch + ".deb");
-		ShellResult built = runShell("dpkg-deb --build --root-owner-group " + shellQuote(root.string()) + " " +
-				     shellQuote(deb.string()));
+		ShellResult built =
+			runShell("dpkg-deb --build --root-owner-group " +
+				 shellQuote(root.string()) + " " + shellQuote(deb.string()));
 		EXPECT_EQ(built.status, 0) << built.output;
 		return deb;
 	}
@@ -175,11 +184,15 @@ echo "${states[$i]}"
 	ShellResult deploy(const std::string &args, const std::string &env = "")
 	{
 		const char *path = std::getenv("PATH");
-		std::string command = "env " + shellQuote("PATH=" + (tmp_ / "bin").string() + ":" + (path ? path : "/usr/bin:/bin")) +
-				      " " + shellQuote("FAKE_LOG=" + log_.string()) + " " +
-				      shellQuote("FAKE_REMOTE_BIN=" + (tmp_ / "remote").string()) + " " + env + " bash " +
-				      shellQuote(std::string(DOCKPOSE_SOURCE_DIR) + "/scripts/deploy") + " " + args +
-				      " </dev/null";
+		std::string command =
+			"env " +
+			shellQuote("PATH=" + (tmp_ / "bin").string() + ":" +
+				   (path ? path : "/usr/bin:/bin")) +
+			" " + shellQuote("FAKE_LOG=" + log_.string()) + " " +
+			shellQuote("FAKE_REMOTE_BIN=" + (tmp_ / "remote").string()) + " " + env +
+			" bash " +
+			shellQuote(std::string(DOCKPOSE_SOURCE_DIR) + "/scripts/deploy") + " " +
+			args + " </dev/null";
 		return runShell(command);
 	}
 
@@ -200,8 +213,9 @@ echo "${states[$i]}"
 TEST_F(Deploy, DryRunPrintsEveryStepInOrderWithHostPortAndIdentity)
 {
 	fs::path deb = makeDeb("arm64", { "sim", "rpi5-imx296" });
-	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) + " --board sim --port 2222 --identity " +
-			 shellQuote(key_.string()) + " --dry-run");
+	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) +
+				 " --board sim --port 2222 --identity " +
+				 shellQuote(key_.string()) + " --dry-run");
 	ASSERT_EQ(run.status, 0) << run.output;
 
 	std::vector<std::string> cmds = commandLines(run.output);
@@ -210,11 +224,14 @@ TEST_F(Deploy, DryRunPrintsEveryStepInOrderWithHostPortAndIdentity)
 	const std::string remote_deb = "/tmp/dockpose_0.1.0_arm64.deb";
 
 	int probe = findLine(cmds, { ssh, "uname -m", "/etc/os-release" });
-	int copy = findLine(cmds, { "scp -o ConnectTimeout=10 -P 2222 -i " + key + " " + deb.string() + " pi@cam7:" + remote_deb });
+	int copy = findLine(cmds, { "scp -o ConnectTimeout=10 -P 2222 -i " + key + " " +
+				    deb.string() + " pi@cam7:" + remote_deb });
 	int update = findLine(cmds, { ssh, "sudo apt-get update" });
 	int install = findLine(cmds, { ssh, "apt-get install -y", "--force-confold", remote_deb });
-	int board = findLine(cmds, { ssh, "DOCKPOSE_BOARD=/etc/dockpose/boards/sim/board.json", "/etc/default/dockposed" });
-	int start = findLine(cmds, { ssh, "systemctl enable dockposed.service", "systemctl restart dockposed.service" });
+	int board = findLine(cmds, { ssh, "DOCKPOSE_BOARD=/etc/dockpose/boards/sim/board.json",
+				     "/etc/default/dockposed" });
+	int start = findLine(cmds, { ssh, "systemctl enable dockposed.service",
+				     "systemctl restart dockposed.service" });
 	int active = findLine(cmds, { ssh, "systemctl is-active dockposed.service" });
 	int journal = findLine(cmds, { ssh, "journalctl -u dockposed.service" });
 	EXPECT_EQ(probe, 0) << run.output;
@@ -234,7 +251,8 @@ TEST_F(Deploy, DryRunPrintsEveryStepInOrderWithHostPortAndIdentity)
 		EXPECT_THAT(cmd, Not(HasSubstr("cmake")));
 	}
 	EXPECT_THAT(run.output, HasSubstr("dockpose-candecode --interface can0"));
-	EXPECT_TRUE(remoteLog().empty()) << "a dry run ran: " << ::testing::PrintToString(remoteLog());
+	EXPECT_TRUE(remoteLog().empty())
+		<< "a dry run ran: " << ::testing::PrintToString(remoteLog());
 }
 
 TEST_F(Deploy, DryRunWithoutPackageShowsTheCrossBuildAndBuildsNothing)
@@ -248,8 +266,10 @@ TEST_F(Deploy, DryRunWithoutPackageShowsTheCrossBuildAndBuildsNothing)
 	ASSERT_GE(configure, 0) << run.output;
 	EXPECT_GT(build, configure) << run.output;
 	ASSERT_GT(copy, build) << run.output;
-	EXPECT_TRUE(std::regex_search(cmds[static_cast<size_t>(copy)],
-				      std::regex(" /\\S*/build/aarch64/dockpose_[0-9]+\\.[0-9]+\\.[0-9]+_arm64\\.deb pi@cam7:/tmp/")))
+	EXPECT_TRUE(std::regex_search(
+		cmds[static_cast<size_t>(copy)],
+		std::regex(
+			" /\\S*/build/aarch64/dockpose_[0-9]+\\.[0-9]+\\.[0-9]+_arm64\\.deb pi@cam7:/tmp/")))
 		<< cmds[static_cast<size_t>(copy)];
 	/* No port or identity given: ssh and scp get only the host. */
 	for (const std::string &cmd : cmds) {
@@ -264,16 +284,21 @@ TEST_F(Deploy, DryRunWithoutPackageShowsTheCrossBuildAndBuildsNothing)
 TEST_F(Deploy, RunsTheStepsAgainstABoard)
 {
 	fs::path deb = makeDeb("arm64", { "sim", "rpi5-imx296" });
-	ShellResult run = deploy("--host root@10.0.0.5 --deb " + shellQuote(deb.string()) + " --board rpi5-imx296 --timeout 5",
+	ShellResult run = deploy("--host root@10.0.0.5 --deb " + shellQuote(deb.string()) +
+					 " --board rpi5-imx296 --timeout 5",
 				 shellQuote("FAKE_STATES=activating activating active"));
 	ASSERT_EQ(run.status, 0) << run.output;
-	EXPECT_THAT(run.output, HasSubstr("dockposed is running on root@10.0.0.5 with board rpi5-imx296"));
+	EXPECT_THAT(run.output,
+		    HasSubstr("dockposed is running on root@10.0.0.5 with board rpi5-imx296"));
 
 	std::vector<std::string> log = remoteLog();
 	int probe = findLine(log, { "ssh ", "root@10.0.0.5", "uname -m" });
-	int copy = findLine(log, { "scp ", deb.string(), "root@10.0.0.5:/tmp/dockpose_0.1.0_arm64.deb" });
-	int install = findLine(log, { "ssh ", "apt-get install -y", "/tmp/dockpose_0.1.0_arm64.deb" });
-	int board = findLine(log, { "ssh ", "DOCKPOSE_BOARD=/etc/dockpose/boards/rpi5-imx296/board.json" });
+	int copy = findLine(log, { "scp ", deb.string(),
+				   "root@10.0.0.5:/tmp/dockpose_0.1.0_arm64.deb" });
+	int install =
+		findLine(log, { "ssh ", "apt-get install -y", "/tmp/dockpose_0.1.0_arm64.deb" });
+	int board = findLine(log, { "ssh ",
+				    "DOCKPOSE_BOARD=/etc/dockpose/boards/rpi5-imx296/board.json" });
 	int start = findLine(log, { "ssh ", "systemctl restart dockposed.service" });
 	int active = findLine(log, { "ssh ", "systemctl is-active dockposed.service", "-lt 5" });
 	int journal = findLine(log, { "ssh ", "journalctl -u dockposed.service" });
@@ -290,9 +315,11 @@ TEST_F(Deploy, RunsTheStepsAgainstABoard)
 TEST_F(Deploy, ReportsAServiceThatDoesNotComeUpWithItsJournal)
 {
 	fs::path deb = makeDeb("arm64", { "rpi5-imx296" });
-	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()), shellQuote("FAKE_STATES=activating failed"));
+	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()),
+				 shellQuote("FAKE_STATES=activating failed"));
 	EXPECT_NE(run.status, 0) << run.output;
-	EXPECT_THAT(run.output, HasSubstr("dockposed.service on pi@cam7 is not active (state: failed)"));
+	EXPECT_THAT(run.output,
+		    HasSubstr("dockposed.service on pi@cam7 is not active (state: failed)"));
 	EXPECT_THAT(run.output, Not(HasSubstr("dockposed is running")));
 	EXPECT_GE(findLine(remoteLog(), { "journalctl -u dockposed.service" }), 0);
 }
@@ -301,8 +328,9 @@ TEST_F(Deploy, ADaemonThatStopsRightAfterStartingIsNotActive)
 {
 	/* Up for two seconds, then killed (the watchdog) and restarting: not good enough. */
 	fs::path deb = makeDeb("arm64", { "rpi5-imx296" });
-	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) + " --timeout 6",
-				 shellQuote("FAKE_STATES=active active activating"));
+	ShellResult run =
+		deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) + " --timeout 6",
+		       shellQuote("FAKE_STATES=active active activating"));
 	EXPECT_NE(run.status, 0) << run.output;
 	EXPECT_THAT(run.output, HasSubstr("is not active (state: activating)"));
 
@@ -316,7 +344,8 @@ TEST_F(Deploy, ADaemonThatStopsRightAfterStartingIsNotActive)
 TEST_F(Deploy, RefusesABoardThatIsNotAarch64)
 {
 	fs::path deb = makeDeb("arm64", { "sim", "rpi5-imx296" });
-	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()), "FAKE_ARCH=x86_64");
+	ShellResult run =
+		deploy("--host pi@cam7 --deb " + shellQuote(deb.string()), "FAKE_ARCH=x86_64");
 	EXPECT_NE(run.status, 0);
 	EXPECT_THAT(run.output, HasSubstr("wrong architecture: pi@cam7 is 'x86_64'"));
 	std::vector<std::string> log = remoteLog();
@@ -327,14 +356,16 @@ TEST_F(Deploy, RefusesABoardThatIsNotDebian12)
 {
 	fs::path deb = makeDeb("arm64", { "sim", "rpi5-imx296" });
 	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()),
-			 "FAKE_OS_ID=debian FAKE_OS_VERSION=11 " + shellQuote("FAKE_PRETTY=Debian GNU/Linux 11 (bullseye)"));
+				 "FAKE_OS_ID=debian FAKE_OS_VERSION=11 " +
+					 shellQuote("FAKE_PRETTY=Debian GNU/Linux 11 (bullseye)"));
 	EXPECT_NE(run.status, 0);
 	EXPECT_THAT(run.output, HasSubstr("runs 'Debian GNU/Linux 11 (bullseye)'"));
 	EXPECT_EQ(findLine(remoteLog(), { "scp " }), -1);
 
 	/* Raspberry Pi OS 12 (32-bit: ID=raspbian) is accepted. */
-	ShellResult pi_os = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) + " --timeout 3",
-			   "FAKE_OS_ID=raspbian FAKE_OS_VERSION=12");
+	ShellResult pi_os =
+		deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) + " --timeout 3",
+		       "FAKE_OS_ID=raspbian FAKE_OS_VERSION=12");
 	EXPECT_EQ(pi_os.status, 0) << pi_os.output;
 }
 
@@ -350,12 +381,16 @@ TEST_F(Deploy, RequiresHost)
 TEST_F(Deploy, RefusesAnUnknownBoardAndListsTheBoards)
 {
 	fs::path deb = makeDeb("arm64", { "sim" });
-	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) + " --board rpi9-nothing --dry-run");
+	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) +
+				 " --board rpi9-nothing --dry-run");
 	EXPECT_NE(run.status, 0);
 	EXPECT_THAT(run.output, HasSubstr("unknown board 'rpi9-nothing'"));
 	/* The list comes from board/: both boards of the tree, as words. */
-	EXPECT_TRUE(std::regex_search(run.output, std::regex("the boards are: .*\\bsim\\b"))) << run.output;
-	EXPECT_TRUE(std::regex_search(run.output, std::regex("the boards are: .*\\brpi5-imx296\\b"))) << run.output;
+	EXPECT_TRUE(std::regex_search(run.output, std::regex("the boards are: .*\\bsim\\b")))
+		<< run.output;
+	EXPECT_TRUE(
+		std::regex_search(run.output, std::regex("the boards are: .*\\brpi5-imx296\\b")))
+		<< run.output;
 	EXPECT_TRUE(commandLines(run.output).empty()) << run.output;
 }
 
@@ -382,7 +417,8 @@ TEST_F(Deploy, RefusesAnAmd64Package)
 TEST_F(Deploy, RefusesAPackageWithoutTheBoard)
 {
 	fs::path deb = makeDeb("arm64", { "sim" });
-	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) + " --board rpi5-imx296 --dry-run");
+	ShellResult run = deploy("--host pi@cam7 --deb " + shellQuote(deb.string()) +
+				 " --board rpi5-imx296 --dry-run");
 	EXPECT_NE(run.status, 0);
 	EXPECT_THAT(run.output, HasSubstr("has no board 'rpi5-imx296'"));
 	EXPECT_TRUE(commandLines(run.output).empty()) << run.output;

@@ -4,19 +4,17 @@
  * The CAN log it writes is decoded by scripts/candecode (python-can + canmatrix
  * through the DBC), an independent reader.
  */
-#include <gtest/gtest.h>
-
 #include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <chrono>
-
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
 #include <string>
 
+#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 namespace {
@@ -49,7 +47,8 @@ protected:
 	RunResult run(const std::string &args, const std::string &prefix = "")
 	{
 		const std::string err = dir_ + "/stderr.txt";
-		const std::string cmd = prefix + kEmulator + DOCKPOSED + std::string(" ") + args + " 2>'" + err + "'";
+		const std::string cmd = prefix + kEmulator + DOCKPOSED + std::string(" ") + args +
+					" 2>'" + err + "'";
 		RunResult r;
 		const int raw = std::system(cmd.c_str());
 		r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : 128 + WTERMSIG(raw);
@@ -76,8 +75,9 @@ protected:
 	std::vector<nlohmann::json> decode(const std::string &log)
 	{
 		const std::string out = dir_ + "/decoded.jsonl";
-		const std::string cmd = std::string(DOCKPOSE_PYTHON) + " " + kSource + "/scripts/candecode --json --log '" +
-					log + "' >'" + out + "' 2>'" + dir_ + "/candecode.err'";
+		const std::string cmd = std::string(DOCKPOSE_PYTHON) + " " + kSource +
+					"/scripts/candecode --json --log '" + log + "' >'" + out +
+					"' 2>'" + dir_ + "/candecode.err'";
 		EXPECT_EQ(std::system(cmd.c_str()), 0) << slurp(dir_ + "/candecode.err");
 		std::vector<nlohmann::json> reports;
 		std::ifstream in(out);
@@ -119,7 +119,8 @@ TEST_F(Dockposed, RunsTheSimBoardAndItsCanLogDecodesWithTheDbc)
 TEST_F(Dockposed, SigtermShutsDownCleanlyWithALastStatusFrame)
 {
 	const std::string log = dir_ + "/can.log";
-	const RunResult r = run("--board " + kSimBoard + " --can-log '" + log + "'", "timeout --preserve-status -s TERM 2 ");
+	const RunResult r = run("--board " + kSimBoard + " --can-log '" + log + "'",
+				"timeout --preserve-status -s TERM 2 ");
 	ASSERT_EQ(r.status, 0) << r.err;
 	const auto reports = decode(log);
 	ASSERT_FALSE(reports.empty());
@@ -128,7 +129,8 @@ TEST_F(Dockposed, SigtermShutsDownCleanlyWithALastStatusFrame)
 
 TEST_F(Dockposed, BadBoardFilesAreRefusedWithTheirErrors)
 {
-	const std::string bad = writeFile("bad.json", "{ \"board\": \"sim\", \"camera\": { \"exposure_us\": 0 } }");
+	const std::string bad =
+		writeFile("bad.json", "{ \"board\": \"sim\", \"camera\": { \"exposure_us\": 0 } }");
 	RunResult r = run("--board '" + bad + "' --for 1");
 	EXPECT_EQ(r.status, 2);
 	EXPECT_NE(r.err.find("camera.exposure_us"), std::string::npos) << r.err;
@@ -156,9 +158,13 @@ TEST_F(Dockposed, BoardsAndBackendsMustBeBuiltIn)
 	/* Copy the sim board's neighbours so relative paths still resolve. */
 	std::system(("cp " + kSource + "/board/sim/*.json '" + dir_ + "/'").c_str());
 
-	RunResult r = run("--board '" + writeFile("other.json", with("\"board\": \"sim\"", "\"board\": \"toaster\"")) + "'");
+	RunResult r =
+		run("--board '" +
+		    writeFile("other.json", with("\"board\": \"sim\"", "\"board\": \"toaster\"")) +
+		    "'");
 	EXPECT_EQ(r.status, 2);
-	EXPECT_NE(r.err.find("board \"toaster\" is not built into this dockposed (built: sim"), std::string::npos)
+	EXPECT_NE(r.err.find("board \"toaster\" is not built into this dockposed (built: sim"),
+		  std::string::npos)
 		<< r.err;
 
 	r = run("--board '" + writeFile("cam.json5", with("\"synthetic\"", "\"libcamera\"")) + "'");
@@ -188,18 +194,23 @@ TEST_F(Dockposed, AStartUpThatBlocksEndsWithStatus75NamingTheStep)
 	const std::string fifo = dir_ + "/can.fifo";
 	ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
 	const auto start = std::chrono::steady_clock::now();
-	const RunResult r = run("--board " + kSimBoard + " --for 30 --startup-timeout 2 --can-log '" + fifo + "'");
-	const double took_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+	const RunResult r = run("--board " + kSimBoard +
+				" --for 30 --startup-timeout 2 --can-log '" + fifo + "'");
+	const double took_s =
+		std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 	EXPECT_EQ(r.status, 75) << r.err;
 	EXPECT_NE(r.err.find("start-up did not finish within 2 s"), std::string::npos) << r.err;
-	EXPECT_NE(r.err.find("stuck starting the camera, strobe and CAN"), std::string::npos) << r.err;
+	EXPECT_NE(r.err.find("stuck starting the camera, strobe and CAN"), std::string::npos)
+		<< r.err;
 	EXPECT_GE(took_s, 1.9);
 	EXPECT_LT(took_s, 25.0); /* (a hang guard, not a timing check: --for is 30 s) */
 
 	/* Under systemd, dockposed's own limit comes first: its default is below the unit's
 	 * TimeoutStartSec, so the journal says what was stuck before systemd kills it. */
 	const std::string help = dir_ + "/help.txt";
-	ASSERT_EQ(std::system((kEmulator + DOCKPOSED + std::string(" --help >'") + help + "'").c_str()), 0);
+	ASSERT_EQ(std::system(
+			  (kEmulator + DOCKPOSED + std::string(" --help >'") + help + "'").c_str()),
+		  0);
 	const std::string help_text = slurp(help);
 	const std::size_t at = help_text.find("--startup-timeout");
 	ASSERT_NE(at, std::string::npos) << help_text;
@@ -212,7 +223,8 @@ TEST_F(Dockposed, AStartUpThatBlocksEndsWithStatus75NamingTheStep)
 	ASSERT_NE(key, std::string::npos);
 	const int systemd_s = std::atoi(unit.c_str() + key + 17);
 	EXPECT_GE(default_s, 10) << help_text;
-	EXPECT_LT(default_s, systemd_s) << "dockposed --startup-timeout default vs the unit's TimeoutStartSec";
+	EXPECT_LT(default_s, systemd_s)
+		<< "dockposed --startup-timeout default vs the unit's TimeoutStartSec";
 
 	/* The limit is checked: 0 and non-numbers are refused. */
 	EXPECT_EQ(run("--board " + kSimBoard + " --startup-timeout 0").status, 2);

@@ -5,17 +5,18 @@
  * tests check that the message lists them instead. The real switching is
  * exercised on gpio-sim elsewhere.
  */
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cerrno>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <sys/stat.h>
-#include <sys/wait.h>
-#include <unistd.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 
 #include "hal/gpiod/gpiod_strobe.h"
 
@@ -28,7 +29,8 @@ namespace {
 bool haveGpioChips()
 {
 	std::error_code ec;
-	for (std::filesystem::directory_iterator it("/dev", ec), end; !ec && it != end; it.increment(ec))
+	for (std::filesystem::directory_iterator it("/dev", ec), end; !ec && it != end;
+	     it.increment(ec))
 		if (it->path().filename().string().rfind("gpiochip", 0) == 0)
 			return true;
 	return false;
@@ -59,7 +61,8 @@ TEST(GpiodStrobe, UnknownChipNameNamesItAndWhatExists)
 	GpiodStrobe strobe("gpiochip97", 17, false);
 	Status status = strobe.open();
 	ASSERT_FALSE(status);
-	EXPECT_THAT(status.message(), HasSubstr("gpio: no GPIO chip named or labelled \"gpiochip97\""));
+	EXPECT_THAT(status.message(),
+		    HasSubstr("gpio: no GPIO chip named or labelled \"gpiochip97\""));
 	expectFoundList(status.message());
 	EXPECT_FALSE(strobe.isOn());
 }

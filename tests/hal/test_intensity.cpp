@@ -4,12 +4,12 @@
  * intensity, honours the input stride without reading its padding, writes only
  * width bytes per output row, and rejects invalid arguments.
  */
-#include <gtest/gtest.h>
-
 #include <cstdint>
 #include <set>
 #include <string>
 #include <vector>
+
+#include <gtest/gtest.h>
 
 #include "hal/intensity.h"
 
@@ -23,11 +23,12 @@ using dockpose::hal::toIntensity;
 
 namespace {
 
-constexpr std::uint8_t kInPad = 0xEE;  /* input row padding: must never reach the output */
+constexpr std::uint8_t kInPad = 0xEE; /* input row padding: must never reach the output */
 constexpr std::uint8_t kOutPad = 0x55; /* output row padding: must stay untouched */
 
 /* A frame of `rows`, each row's bytes followed by padding up to `stride`. */
-std::vector<std::uint8_t> frameWithPadding(const std::vector<std::vector<std::uint8_t>> &rows, int stride)
+std::vector<std::uint8_t> frameWithPadding(const std::vector<std::vector<std::uint8_t>> &rows,
+					   int stride)
 {
 	std::vector<std::uint8_t> data(rows.size() * static_cast<std::size_t>(stride), kInPad);
 	for (std::size_t y = 0; y < rows.size(); ++y)
@@ -42,7 +43,8 @@ struct Converted {
 };
 
 /* Converts a 3x2 frame into an output with stride 5 (2 padding bytes per row). */
-Converted convert3x2(PixelLayout layout, const std::vector<std::vector<std::uint8_t>> &rows, int stride)
+Converted convert3x2(PixelLayout layout, const std::vector<std::vector<std::uint8_t>> &rows,
+		     int stride)
 {
 	const std::vector<std::uint8_t> data = frameWithPadding(rows, stride);
 	Converted c;
@@ -56,17 +58,18 @@ void expectOutput(const Converted &c, const std::vector<std::uint8_t> &expected)
 	ASSERT_TRUE(c.ok);
 	for (int y = 0; y < 2; ++y) {
 		for (int x = 0; x < 3; ++x)
-			EXPECT_EQ(c.out[y * 5 + x], expected[y * 3 + x]) << "pixel " << x << "," << y;
+			EXPECT_EQ(c.out[y * 5 + x], expected[y * 3 + x])
+				<< "pixel " << x << "," << y;
 		EXPECT_EQ(c.out[y * 5 + 3], kOutPad) << "output padding written, row " << y;
 		EXPECT_EQ(c.out[y * 5 + 4], kOutPad) << "output padding written, row " << y;
 	}
 }
 
 /* Luma of pure red, green, blue under (77 R + 150 G + 29 B + 128) >> 8, worked by hand. */
-constexpr std::uint8_t kRed = 77;    /* (77*255 + 128) >> 8 = 19763 >> 8 */
+constexpr std::uint8_t kRed = 77; /* (77*255 + 128) >> 8 = 19763 >> 8 */
 constexpr std::uint8_t kGreen = 149; /* (150*255 + 128) >> 8 = 38378 >> 8 */
-constexpr std::uint8_t kBlue = 29;   /* (29*255 + 128) >> 8 = 7523 >> 8 */
-constexpr std::uint8_t kMix = 18;    /* R 10, G 20, B 30: (770 + 3000 + 870 + 128) >> 8 = 4768 >> 8 */
+constexpr std::uint8_t kBlue = 29; /* (29*255 + 128) >> 8 = 7523 >> 8 */
+constexpr std::uint8_t kMix = 18; /* R 10, G 20, B 30: (770 + 3000 + 870 + 128) >> 8 = 4768 >> 8 */
 
 } /* namespace */
 
@@ -109,10 +112,11 @@ TEST(Intensity, BytesPerPixelAndMinimumStride)
 
 TEST(Intensity, NamesAreDistinct)
 {
-	const PixelLayout all[] = { PixelLayout::Gray8,  PixelLayout::YUV420, PixelLayout::NV12,
-				    PixelLayout::NV21,   PixelLayout::YUYV,   PixelLayout::UYVY,
-				    PixelLayout::RGB888, PixelLayout::BGR888, PixelLayout::XRGB8888,
-				    PixelLayout::XBGR8888 };
+	const PixelLayout all[] = { PixelLayout::Gray8,	   PixelLayout::YUV420,
+				    PixelLayout::NV12,	   PixelLayout::NV21,
+				    PixelLayout::YUYV,	   PixelLayout::UYVY,
+				    PixelLayout::RGB888,   PixelLayout::BGR888,
+				    PixelLayout::XRGB8888, PixelLayout::XBGR8888 };
 	std::set<std::string> names;
 	for (const auto layout : all)
 		names.insert(pixelLayoutName(layout));
@@ -123,7 +127,8 @@ TEST(Intensity, NamesAreDistinct)
 TEST(Intensity, Gray8AndYPlanesCopyTheFirstPlaneRows)
 {
 	const std::vector<std::vector<std::uint8_t>> rows = { { 10, 20, 30 }, { 40, 50, 60 } };
-	for (const auto layout : { PixelLayout::Gray8, PixelLayout::YUV420, PixelLayout::NV12, PixelLayout::NV21 }) {
+	for (const auto layout :
+	     { PixelLayout::Gray8, PixelLayout::YUV420, PixelLayout::NV12, PixelLayout::NV21 }) {
 		SCOPED_TRACE(pixelLayoutName(layout));
 		expectOutput(convert3x2(layout, rows, 8), { 10, 20, 30, 40, 50, 60 });
 	}
@@ -148,10 +153,11 @@ TEST(Intensity, Rgb888IsStoredBgrInMemory)
 {
 	/* libcamera RGB888 = DRM RG24 = V4L2 BGR24: bytes B, G, R. */
 	const std::vector<std::vector<std::uint8_t>> rows = {
-		{ 0, 0, 255, /**/ 0, 255, 0, /**/ 255, 0, 0 },	 /* red, green, blue */
+		{ 0, 0, 255, /**/ 0, 255, 0, /**/ 255, 0, 0 }, /* red, green, blue */
 		{ 30, 20, 10, /**/ 7, 7, 7, /**/ 255, 255, 255 }, /* (10,20,30), grey 7, white */
 	};
-	expectOutput(convert3x2(PixelLayout::RGB888, rows, 11), { kRed, kGreen, kBlue, kMix, 7, 255 });
+	expectOutput(convert3x2(PixelLayout::RGB888, rows, 11),
+		     { kRed, kGreen, kBlue, kMix, 7, 255 });
 }
 
 TEST(Intensity, Bgr888IsStoredRgbInMemory)
@@ -161,7 +167,8 @@ TEST(Intensity, Bgr888IsStoredRgbInMemory)
 		{ 255, 0, 0, /**/ 0, 255, 0, /**/ 0, 0, 255 },
 		{ 10, 20, 30, /**/ 7, 7, 7, /**/ 0, 0, 0 },
 	};
-	expectOutput(convert3x2(PixelLayout::BGR888, rows, 12), { kRed, kGreen, kBlue, kMix, 7, 0 });
+	expectOutput(convert3x2(PixelLayout::BGR888, rows, 12),
+		     { kRed, kGreen, kBlue, kMix, 7, 0 });
 }
 
 TEST(Intensity, Xrgb8888IsBgrxInMemoryAndIgnoresX)
@@ -170,7 +177,8 @@ TEST(Intensity, Xrgb8888IsBgrxInMemoryAndIgnoresX)
 		{ 0, 0, 255, 0xAA, /**/ 0, 255, 0, 0xAA, /**/ 255, 0, 0, 0xAA },
 		{ 30, 20, 10, 0xFF, /**/ 9, 9, 9, 0x00, /**/ 0, 0, 0, 0xFF },
 	};
-	expectOutput(convert3x2(PixelLayout::XRGB8888, rows, 13), { kRed, kGreen, kBlue, kMix, 9, 0 });
+	expectOutput(convert3x2(PixelLayout::XRGB8888, rows, 13),
+		     { kRed, kGreen, kBlue, kMix, 9, 0 });
 }
 
 TEST(Intensity, Xbgr8888IsRgbxInMemoryAndIgnoresX)
@@ -179,7 +187,8 @@ TEST(Intensity, Xbgr8888IsRgbxInMemoryAndIgnoresX)
 		{ 255, 0, 0, 0xAA, /**/ 0, 255, 0, 0xAA, /**/ 0, 0, 255, 0xAA },
 		{ 10, 20, 30, 0xFF, /**/ 9, 9, 9, 0x00, /**/ 255, 255, 255, 0xFF },
 	};
-	expectOutput(convert3x2(PixelLayout::XBGR8888, rows, 16), { kRed, kGreen, kBlue, kMix, 9, 255 });
+	expectOutput(convert3x2(PixelLayout::XBGR8888, rows, 16),
+		     { kRed, kGreen, kBlue, kMix, 9, 255 });
 }
 
 TEST(Intensity, ExactStrideWithoutPaddingWorks)

@@ -5,14 +5,14 @@
  * machine without cameras (this build host), and a short capture with
  * stop/start cycles where a camera exists (vimc in the VM; skipped here).
  */
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
-
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <string>
 #include <vector>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 
 #include "hal/libcamera/libcamera_camera.h"
 
@@ -64,10 +64,10 @@ TEST(LibcameraFormats, FourccsMapToLayouts)
 
 TEST(LibcameraFormats, FormatsWithoutAnIntensityPlaneAreRefused)
 {
-	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('B', 'A', '1', '0')));	  /* SGRBG10 */
-	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('R', 'G', 'G', 'B')));	  /* SRGGB8 Bayer */
-	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('M', 'J', 'P', 'G')));	  /* MJPEG */
-	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('R', '1', '0', ' ')));	  /* R10 */
+	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('B', 'A', '1', '0'))); /* SGRBG10 */
+	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('R', 'G', 'G', 'B'))); /* SRGGB8 Bayer */
+	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('M', 'J', 'P', 'G'))); /* MJPEG */
+	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('R', '1', '0', ' '))); /* R10 */
 	/* A modifier (CSI-2 packing, vendor tiling) changes the memory layout. */
 	const std::uint64_t csi2_packed = (std::uint64_t{ 11 } << 56) | 1;
 	EXPECT_FALSE(pixelLayoutForFourcc(fourcc('R', '8', ' ', ' '), csi2_packed));
@@ -107,8 +107,9 @@ TEST(LibcameraSelect, ById)
 
 	const Status s = selectCamera(ids, "imx296", 0, &chosen);
 	ASSERT_FALSE(s);
-	EXPECT_EQ(s.message(), "libcamera: no camera with id \"imx296\" (cameras: /base/a/imx296@1a, "
-			       "platform/vimc.0 Sensor B)");
+	EXPECT_EQ(s.message(),
+		  "libcamera: no camera with id \"imx296\" (cameras: /base/a/imx296@1a, "
+		  "platform/vimc.0 Sensor B)");
 }
 
 TEST(LibcameraSelect, ByIndex)
@@ -136,7 +137,8 @@ TEST(LibcameraConfig, ChecksBeforeTouchingTheCamera)
 
 	CameraConfig c;
 	c.buffer_count = 1;
-	EXPECT_THAT(checkCameraConfig(c).message(), HasSubstr("buffer_count 1 out of range (2..16)"));
+	EXPECT_THAT(checkCameraConfig(c).message(),
+		    HasSubstr("buffer_count 1 out of range (2..16)"));
 	c.buffer_count = 17;
 	EXPECT_THAT(checkCameraConfig(c).message(), HasSubstr("buffer_count 17"));
 
@@ -162,7 +164,8 @@ TEST(LibcameraConfig, ChecksBeforeTouchingTheCamera)
 	c = CameraConfig{};
 	c.exposure_us = 20000;
 	c.frame_duration_us = 16667;
-	EXPECT_THAT(checkCameraConfig(c).message(), HasSubstr("exposure_us 20000 exceeds frame_duration_us 16667"));
+	EXPECT_THAT(checkCameraConfig(c).message(),
+		    HasSubstr("exposure_us 20000 exceeds frame_duration_us 16667"));
 	c.frame_duration_us = 0; /* free-running: any exposure */
 	EXPECT_TRUE(checkCameraConfig(c));
 }
@@ -267,7 +270,8 @@ TEST(LibcameraCamera, SelectionErrorsNameTheCameras)
 	s = camera.configure(c);
 	ASSERT_FALSE(s);
 	if (hasMediaDevices())
-		EXPECT_THAT(s.message(), HasSubstr("no camera with id \"/base/soc/no-such-camera@0\""));
+		EXPECT_THAT(s.message(),
+			    HasSubstr("no camera with id \"/base/soc/no-such-camera@0\""));
 	else
 		EXPECT_THAT(s.message(), StartsWith("libcamera: no cameras found"));
 }
@@ -313,11 +317,13 @@ TEST(LibcameraCamera, CapturesAndCyclesWhereACameraExists)
 		std::uint64_t last_sequence = 0;
 		for (int i = 0; i < 8; ++i) {
 			Frame frame;
-			ASSERT_EQ(camera.waitFrame(&frame, 3000), WaitResult::Frame) << camera.lastError();
+			ASSERT_EQ(camera.waitFrame(&frame, 3000), WaitResult::Frame)
+				<< camera.lastError();
 			ASSERT_TRUE(frame.image.valid());
 			EXPECT_EQ(frame.image.width, camera.width());
 			EXPECT_EQ(frame.image.height, camera.height());
-			EXPECT_EQ(frame.image.stride_bytes, camera.zeroCopy() ? camera.strideBytes() : camera.width());
+			EXPECT_EQ(frame.image.stride_bytes,
+				  camera.zeroCopy() ? camera.strideBytes() : camera.width());
 			if (i > 0) {
 				EXPECT_GT(frame.sequence, last_sequence);
 			}

@@ -5,8 +5,6 @@
  * machine (no SocketCAN here: the clear error; in a CAN-capable VM: the
  * missing-interface error). The vcan behaviour itself is tested in the VM.
  */
-#include "hal/socketcan/socketcan_bus.h"
-
 #include <linux/can/error.h>
 #include <net/if_arp.h>
 #include <sys/socket.h>
@@ -23,6 +21,8 @@
 #include <thread>
 
 #include <gtest/gtest.h>
+
+#include "hal/socketcan/socketcan_bus.h"
 
 /*
  * Allocation counting for the no-allocation test (tests/common/counting_allocator.h),
@@ -122,7 +122,7 @@ public:
 
 	/* Script. */
 	int fail_opens = 0;
-	int accept_writes = -1;		/* -1: all; n: n more, then write_error */
+	int accept_writes = -1; /* -1: all; n: n more, then write_error */
 	int write_error = ENOBUFS;
 	int read_error = EAGAIN;
 	std::int64_t now_ns = 1000000000;
@@ -281,7 +281,7 @@ TEST(SocketCanBus, EnobufsKeepsTheFrameQueuedAndPollRetries)
 	CanStats s = h.bus->stats();
 	EXPECT_EQ(s.tx_frames, 1u);
 	EXPECT_EQ(s.tx_queued, 2u);
-	EXPECT_EQ(s.tx_enobufs, 2u);	/* one refused write per send, no spinning */
+	EXPECT_EQ(s.tx_enobufs, 2u); /* one refused write per send, no spinning */
 	EXPECT_EQ(h.io->write_calls, 3);
 	EXPECT_EQ(s.state, CanState::ErrorActive);
 
@@ -453,7 +453,7 @@ TEST(SocketCanBus, ReceivesFramesAndClassifiesErrorFrames)
 	h.io->addReadFd(fd, 333);
 
 	CanFrame f;
-	ASSERT_TRUE(h.bus->receive(&f));	/* receive() polls when the ring is empty */
+	ASSERT_TRUE(h.bus->receive(&f)); /* receive() polls when the ring is empty */
 	EXPECT_EQ(f.id, 0x310u);
 	EXPECT_FALSE(f.extended);
 	EXPECT_EQ(f.len, 4);
@@ -603,9 +603,9 @@ TEST(SocketCanBus, FramePathNeverAllocates)
 	fd.fd = true;
 	h.bus->send(fd);
 	h.io->write_error = ENXIO;
-	h.bus->send(frame(0x300));	/* the interface vanished: Down */
+	h.bus->send(frame(0x300)); /* the interface vanished: Down */
 	h.io->fail_opens = 1;
-	h.bus->poll();			/* a failed reopening */
+	h.bus->poll(); /* a failed reopening */
 	h.io->accept_writes = -1;
 	h.io->now_ns += 600000000;
 	h.bus->poll();
@@ -621,7 +621,7 @@ TEST(SocketCanBus, FramePathNeverAllocates)
 	const std::string error = h.bus->lastError();
 	test::g_armed = false;
 	EXPECT_GT(test::g_allocations.load(), 0) << error;
-	EXPECT_EQ(h.bus->stats().restarts, 2u);	/* one error frame, one reopening */
+	EXPECT_EQ(h.bus->stats().restarts, 2u); /* one error frame, one reopening */
 	EXPECT_EQ(h.bus->stats().state, CanState::ErrorActive);
 }
 
@@ -645,8 +645,9 @@ TEST(SocketCanKernel, OpenSaysWhatIsMissing)
 	EXPECT_EQ(bus.stats().state, CanState::Closed);
 	const int err = socketCanErrno();
 	if (err == EAFNOSUPPORT)
-		EXPECT_EQ(st.message(), "can: this kernel has no SocketCAN support (socket(PF_CAN): "
-					"Address family not supported by protocol)");
+		EXPECT_EQ(st.message(),
+			  "can: this kernel has no SocketCAN support (socket(PF_CAN): "
+			  "Address family not supported by protocol)");
 	else if (err == 0)
 		EXPECT_EQ(st.message().rfind("can: no CAN interface \"dpnx9\"", 0), 0u)
 			<< st.message();
@@ -659,8 +660,9 @@ TEST(SocketCanKernel, SocketErrorMessages)
 {
 	char buf[200];
 	socketcan::socketErrorMessage(EAFNOSUPPORT, buf);
-	EXPECT_STREQ(buf, "can: this kernel has no SocketCAN support (socket(PF_CAN): Address family "
-			  "not supported by protocol)");
+	EXPECT_STREQ(buf,
+		     "can: this kernel has no SocketCAN support (socket(PF_CAN): Address family "
+		     "not supported by protocol)");
 	socketcan::socketErrorMessage(EPROTONOSUPPORT, buf);
 	EXPECT_NE(std::strstr(buf, "CONFIG_CAN_RAW"), nullptr) << buf;
 	socketcan::socketErrorMessage(EMFILE, buf);
@@ -762,7 +764,7 @@ TEST_F(SysfsTree, MissingInterfaceWithoutAnyCan)
 TEST(SocketCanKernel, InterfaceNames)
 {
 	EXPECT_TRUE(socketcan::validInterfaceName("can0"));
-	EXPECT_TRUE(socketcan::validInterfaceName("vcan_long_name0"));	/* 15 characters */
+	EXPECT_TRUE(socketcan::validInterfaceName("vcan_long_name0")); /* 15 characters */
 	EXPECT_FALSE(socketcan::validInterfaceName("vcan_long_name01"));
 	EXPECT_FALSE(socketcan::validInterfaceName(""));
 	EXPECT_FALSE(socketcan::validInterfaceName("can 0"));
@@ -777,7 +779,7 @@ TEST(SocketCanPure, ErrorFrameClassification)
 	CanStats s;
 	s.state = CanState::ErrorActive;
 
-	socketcan::classifyErrorFrame(kernelFrame(0x123, 8), &s);	/* not an error frame */
+	socketcan::classifyErrorFrame(kernelFrame(0x123, 8), &s); /* not an error frame */
 	EXPECT_EQ(s.error_frames, 0u);
 
 	socketcan::classifyErrorFrame(errorFrame(CAN_ERR_PROT | CAN_ERR_BUSERROR), &s);
@@ -814,7 +816,7 @@ TEST(SocketCanPure, ErrorFrameClassification)
 
 TEST(SocketCanPure, ClassicConversion)
 {
-	CanFrame f = frame(0x7ff, 12, 1);	/* len clamps to 8 */
+	CanFrame f = frame(0x7ff, 12, 1); /* len clamps to 8 */
 	can_frame k;
 	ASSERT_TRUE(socketcan::toCanFrame(f, &k));
 	EXPECT_EQ(k.can_id, 0x7ffu);
@@ -846,7 +848,7 @@ TEST(SocketCanPure, ClassicConversion)
 	EXPECT_EQ(back.timestamp_ns, 77);
 
 	can_frame big = kernelFrame(0x1234 | CAN_EFF_FLAG, 8);
-	big.can_dlc = 15;	/* a DLC above 8 still carries 8 bytes */
+	big.can_dlc = 15; /* a DLC above 8 still carries 8 bytes */
 	ASSERT_TRUE(socketcan::fromCanFrame(big, 0, &back));
 	EXPECT_TRUE(back.extended);
 	EXPECT_EQ(back.id, 0x1234u);
@@ -870,7 +872,7 @@ TEST(SocketCanPure, FdConversion)
 
 	CanFrame f = frame(0x123, 33, 1);
 	f.fd = true;
-	f.data[40] = 0xee;	/* beyond len: must not leak into the padding */
+	f.data[40] = 0xee; /* beyond len: must not leak into the padding */
 	canfd_frame k;
 	ASSERT_TRUE(socketcan::toCanFdFrame(f, &k));
 	EXPECT_EQ(k.can_id, 0x123u);
@@ -892,7 +894,7 @@ TEST(SocketCanPure, FdConversion)
 
 	canfd_frame in{};
 	in.can_id = 0x1abc | CAN_EFF_FLAG;
-	in.len = 70;	/* malformed: clamps to 64 */
+	in.len = 70; /* malformed: clamps to 64 */
 	in.data[63] = 0x42;
 	CanFrame back;
 	ASSERT_TRUE(socketcan::fromCanFdFrame(in, 5, &back));
@@ -929,7 +931,7 @@ TEST(SocketCanPure, KernelFilters)
 	EXPECT_TRUE(kernelPasses(std_filter, 0x300));
 	EXPECT_TRUE(kernelPasses(std_filter, 0x30f));
 	EXPECT_FALSE(kernelPasses(std_filter, 0x310));
-	EXPECT_FALSE(kernelPasses(std_filter, 0x300 | CAN_EFF_FLAG));	/* 29-bit id 0x300 */
+	EXPECT_FALSE(kernelPasses(std_filter, 0x300 | CAN_EFF_FLAG)); /* 29-bit id 0x300 */
 	EXPECT_FALSE(kernelPasses(std_filter, 0x300 | CAN_RTR_FLAG));
 
 	const can_filter ext_filter = socketcan::toKernelFilter({ 0x18ff0000, 0x1fff0000, true });

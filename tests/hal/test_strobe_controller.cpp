@@ -5,9 +5,6 @@
  * causality allows (a switch never happens before its time) and generous
  * where the scheduler is involved (this machine is shared).
  */
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -15,6 +12,9 @@
 #include <mutex>
 #include <thread>
 #include <vector>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 
 #include "hal/can_bus.h"
 #include "hal/clock.h"
@@ -173,7 +173,7 @@ TEST(StrobeController, StopLeavesTheLedOff)
 		control.stop();
 		EXPECT_FALSE(fake.isOn());
 		EXPECT_FALSE(control.isOn());
-		control.stop();	/* idempotent */
+		control.stop(); /* idempotent */
 
 		/* Restart: constant mode was reset by stop. */
 		ASSERT_TRUE(control.start());
@@ -211,7 +211,7 @@ TEST(StrobeController, PulseLightsItsWindowOnly)
 	std::vector<FakeStrobe::Call> ons = fake.successfulSwitches(true);
 	std::vector<FakeStrobe::Call> offs = fake.successfulSwitches(false);
 	ASSERT_EQ(ons.size(), 1u);
-	ASSERT_EQ(offs.size(), 2u);	/* start(), then the pulse end */
+	ASSERT_EQ(offs.size(), 2u); /* start(), then the pulse end */
 	const FakeStrobe::Call &on = ons[0];
 	const FakeStrobe::Call &off = offs[1];
 	/* Never early, and on time within the tolerance. */
@@ -227,7 +227,8 @@ TEST(StrobeController, PulseLightsItsWindowOnly)
 	/* Before the pulse, after start(). */
 	EXPECT_EQ(control.lighting(start_ns - 30 * kMs, on.before_ns - 3 * kMs), Lighting::Unlit);
 	/* After the pulse. */
-	EXPECT_EQ(control.lighting(off.after_ns + 3 * kMs, off.after_ns + 15 * kMs), Lighting::Unlit);
+	EXPECT_EQ(control.lighting(off.after_ns + 3 * kMs, off.after_ns + 15 * kMs),
+		  Lighting::Unlit);
 	/* Across either switch, or the whole pulse. */
 	EXPECT_EQ(control.lighting(on.before_ns - kMs, on.after_ns + kMs), Lighting::Mixed);
 	EXPECT_EQ(control.lighting(off.before_ns - kMs, off.after_ns + kMs), Lighting::Mixed);
@@ -242,13 +243,15 @@ TEST(StrobeController, LightingOutsideHistoryOrInTheFutureIsMixed)
 	FakeStrobe fake;
 	StrobeController control(&fake, 0);
 	std::int64_t before_start = monotonicNs();
-	EXPECT_EQ(control.lighting(before_start - 10 * kMs, before_start - 5 * kMs), Lighting::Mixed);
+	EXPECT_EQ(control.lighting(before_start - 10 * kMs, before_start - 5 * kMs),
+		  Lighting::Mixed);
 	std::this_thread::sleep_for(std::chrono::milliseconds(2));
 	ASSERT_TRUE(control.start());
 	std::int64_t t = monotonicNs();
 	std::this_thread::sleep_for(std::chrono::milliseconds(10));
 	/* Before start(): nothing is known. */
-	EXPECT_EQ(control.lighting(before_start - 10 * kMs, before_start - 5 * kMs), Lighting::Mixed);
+	EXPECT_EQ(control.lighting(before_start - 10 * kMs, before_start - 5 * kMs),
+		  Lighting::Mixed);
 	/* After start(): off. */
 	EXPECT_EQ(control.lighting(t + 1, t + 5 * kMs), Lighting::Unlit);
 	/* Not over yet. */
@@ -292,8 +295,8 @@ TEST(StrobeController, OverlappingPulsesLightTheirUnion)
 	StrobeController control(&fake, 0);
 	ASSERT_TRUE(control.start());
 	std::int64_t a = monotonicNs() + 30 * kMs;
-	ASSERT_TRUE(control.schedulePulse(a + 10 * kMs, 20 * kMs));	/* [a+10, a+30) */
-	ASSERT_TRUE(control.schedulePulse(a, 15 * kMs));		/* [a, a+15) */
+	ASSERT_TRUE(control.schedulePulse(a + 10 * kMs, 20 * kMs)); /* [a+10, a+30) */
+	ASSERT_TRUE(control.schedulePulse(a, 15 * kMs)); /* [a, a+15) */
 	ASSERT_TRUE(waitFor([&] { return fake.successfulSwitches(false).size() >= 2; }));
 	sleepUntil(a + 40 * kMs);
 	std::vector<FakeStrobe::Call> ons = fake.successfulSwitches(true);
@@ -357,7 +360,7 @@ TEST(StrobeController, DeadManSwitchesOffUntilKicked)
 	EXPECT_FALSE(control.isOn());
 	std::vector<FakeStrobe::Call> offs = fake.successfulSwitches(false);
 	ASSERT_EQ(offs.size(), 2u);
-	EXPECT_GE(offs[1].before_ns, t0 + 60 * kMs);	/* not before the timeout */
+	EXPECT_GE(offs[1].before_ns, t0 + 60 * kMs); /* not before the timeout */
 	EXPECT_LE(offs[1].before_ns, t0 + 60 * kMs + 100 * kMs);
 
 	/* Stays off, the pending pulse was cancelled, new pulses are refused. */
@@ -391,7 +394,7 @@ TEST(StrobeController, KicksKeepItAlive)
 	EXPECT_FALSE(control.stalled());
 	EXPECT_EQ(control.stallCount(), 0u);
 	EXPECT_TRUE(fake.isOn());
-	EXPECT_EQ(fake.successfulSwitches(false).size(), 1u);	/* only start() */
+	EXPECT_EQ(fake.successfulSwitches(false).size(), 1u); /* only start() */
 }
 
 TEST(StrobeController, SetErrorsAreCountedAndTheLineAssumedOff)
@@ -458,7 +461,8 @@ TEST(StrobeController, HundredsOfPulsesInARow)
 				starts.push_back(start);
 			} else {
 				/* Only refused when this thread was so late the pulse is past. */
-				ASSERT_LT(start, monotonicNs()) << "future pulse " << i << " refused";
+				ASSERT_LT(start, monotonicNs())
+					<< "future pulse " << i << " refused";
 				skipped++;
 			}
 			i++;
@@ -503,12 +507,14 @@ TEST(StrobeController, HundredsOfPulsesInARow)
 	std::int64_t median = late[late.size() / 2];
 	EXPECT_LT(median, kMs) << "median lateness " << median << " ns";
 	std::printf("%d of %d pulses lit; on-switch lateness: median %lld us, max %lld us\n", ons,
-		    scheduled, static_cast<long long>(median / 1000), static_cast<long long>(late.back() / 1000));
+		    scheduled, static_cast<long long>(median / 1000),
+		    static_cast<long long>(late.back() / 1000));
 
 	/* The history holds the last pulses only. */
 	std::int64_t first = starts.front();
 	EXPECT_EQ(control.lighting(first + kWidth / 4, first + kWidth / 2), Lighting::Mixed);
 	std::int64_t last_off_after = calls.back().after_ns;
-	EXPECT_EQ(control.lighting(last_off_after + kMs, last_off_after + 10 * kMs), Lighting::Unlit);
+	EXPECT_EQ(control.lighting(last_off_after + kMs, last_off_after + 10 * kMs),
+		  Lighting::Unlit);
 	EXPECT_FALSE(fake.isOn());
 }

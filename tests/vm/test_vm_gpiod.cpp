@@ -47,8 +47,8 @@ namespace {
 
 /* Where to read the line's level (sim_gpioN/value) and what was read at release. */
 char g_probe_value_path[512];
-int g_probe_out_fd = -1;			/* the probe .so: append "release <offset> <level>" here */
-std::atomic<int> g_level_at_release{ -1 };	/* the last level read while releasing a held line */
+int g_probe_out_fd = -1; /* the probe .so: append "release <offset> <level>" here */
+std::atomic<int> g_level_at_release{ -1 }; /* the last level read while releasing a held line */
 std::atomic<int> g_releases{ 0 };
 static_assert(std::atomic<int>::is_always_lock_free);
 
@@ -64,7 +64,7 @@ int readLevel(const char *path)
 	return n == 1 && (c == '0' || c == '1') ? c - '0' : -1;
 }
 
-template <typename Fn>
+template<typename Fn>
 Fn nextSymbol(const char *name)
 {
 	void *p = dlsym(RTLD_NEXT, name);
@@ -89,7 +89,8 @@ extern "C" void gpiod_line_release(gpiod_line *line)
 	using IsRequestedFn = bool (*)(gpiod_line *);
 	using OffsetFn = unsigned int (*)(gpiod_line *);
 	static const ReleaseFn release = nextSymbol<ReleaseFn>("gpiod_line_release");
-	static const IsRequestedFn is_requested = nextSymbol<IsRequestedFn>("gpiod_line_is_requested");
+	static const IsRequestedFn is_requested =
+		nextSymbol<IsRequestedFn>("gpiod_line_is_requested");
 	static const OffsetFn offset = nextSymbol<OffsetFn>("gpiod_line_offset");
 
 #ifdef DOCKPOSE_VM_RELEASE_PROBE
@@ -98,7 +99,8 @@ extern "C" void gpiod_line_release(gpiod_line *line)
 		const char *out = std::getenv("DOCKPOSE_VM_PROBE_OUT");
 		if (path && out) {
 			std::snprintf(g_probe_value_path, sizeof(g_probe_value_path), "%s", path);
-			g_probe_out_fd = ::open(out, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+			g_probe_out_fd =
+				::open(out, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
 		}
 	}
 #endif
@@ -109,9 +111,10 @@ extern "C" void gpiod_line_release(gpiod_line *line)
 		g_releases.fetch_add(1);
 		if (g_probe_out_fd >= 0) {
 			char text[64];
-			const int n = std::snprintf(text, sizeof(text), "release %u %d\n", offset ? offset(line) : 0u,
-						    level);
-			if (n > 0 && ::write(g_probe_out_fd, text, static_cast<std::size_t>(n)) < 0) {
+			const int n = std::snprintf(text, sizeof(text), "release %u %d\n",
+						    offset ? offset(line) : 0u, level);
+			if (n > 0 &&
+			    ::write(g_probe_out_fd, text, static_cast<std::size_t>(n)) < 0) {
 			}
 		}
 	}
@@ -140,8 +143,8 @@ extern "C" void gpiod_line_release(gpiod_line *line)
 #include <gtest/gtest.h>
 
 #include "hal/clock.h"
-#include "vm_shell.h"
 #include "hal/gpiod/gpiod_strobe.h"
+#include "vm_shell.h"
 
 extern char **environ;
 
@@ -150,7 +153,7 @@ namespace {
 using dockpose::hal::GpiodStrobe;
 using dockpose::hal::monotonicNs;
 
-constexpr int kLine = 3;	/* "led-strobe" */
+constexpr int kLine = 3; /* "led-strobe" */
 constexpr const char *kLabel = "dockpose-sim";
 
 std::string simChip()
@@ -196,11 +199,13 @@ std::string gpioinfoLine(int line = kLine)
 	const CommandResult r = run(std::string("gpioinfo ") + kLabel);
 	std::istringstream in(r.output);
 	std::string text;
-	const std::string key = "line " + std::string(line < 10 ? "  " : " ") + std::to_string(line) + ":";
+	const std::string key =
+		"line " + std::string(line < 10 ? "  " : " ") + std::to_string(line) + ":";
 	while (std::getline(in, text))
 		if (text.find(key) != std::string::npos)
 			return text;
-	return "(no line " + std::to_string(line) + " in gpioinfo " + kLabel + ": " + r.output + ")";
+	return "(no line " + std::to_string(line) + " in gpioinfo " + kLabel + ": " + r.output +
+	       ")";
 }
 
 bool contains(const std::string &text, const std::string &part)
@@ -215,7 +220,6 @@ void armReleaseProbe()
 	g_level_at_release = -1;
 	g_releases = 0;
 }
-
 
 /* A child process with its stdin and stdout on pipes (stderr inherited). */
 class Child
@@ -268,14 +272,15 @@ public:
 	bool started() const { return pid_ > 0; }
 	void signal(int sig) const
 	{
-		if (pid_ > 0)	/* never kill(-1): not after wait() reaped it */
+		if (pid_ > 0) /* never kill(-1): not after wait() reaped it */
 			::kill(pid_, sig);
 	}
 
 	/* The next line the child printed ("" on timeout or end of output). */
 	std::string readLine(int timeout_ms)
 	{
-		const std::int64_t end_ns = monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
+		const std::int64_t end_ns =
+			monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
 		for (;;) {
 			const std::size_t eol = buffer_.find('\n');
 			if (eol != std::string::npos) {
@@ -302,7 +307,8 @@ public:
 	/* The line starting with prefix, skipping others. */
 	std::string readLineStartingWith(const std::string &prefix, int timeout_ms)
 	{
-		const std::int64_t end_ns = monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
+		const std::int64_t end_ns =
+			monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
 		for (;;) {
 			const std::int64_t left_ms = (end_ns - monotonicNs()) / 1000000;
 			if (left_ms <= 0)
@@ -324,7 +330,8 @@ public:
 	int wait(int timeout_ms)
 	{
 		int status = 0;
-		const bool ended = waitUntil([&] { return ::waitpid(pid_, &status, WNOHANG) == pid_; }, timeout_ms);
+		const bool ended = waitUntil(
+			[&] { return ::waitpid(pid_, &status, WNOHANG) == pid_; }, timeout_ms);
 		if (!ended)
 			return -1;
 		pid_ = -1;
@@ -338,7 +345,7 @@ private:
 	std::string buffer_;
 };
 
-std::string g_self;	/* this program, for --hold-line children */
+std::string g_self; /* this program, for --hold-line children */
 
 /* ------------------------------------------------------------------------- */
 /* --hold-line CHIP LINE [active-low]: hold the strobe lit like dockposed.     */
@@ -357,7 +364,8 @@ void onFatalSignal(int sig)
 	if (g_held)
 		g_held->forceOff();
 	char text[32];
-	const int n = std::snprintf(text, sizeof(text), "handler-level %d\n", readLevel(g_probe_value_path));
+	const int n = std::snprintf(text, sizeof(text), "handler-level %d\n",
+				    readLevel(g_probe_value_path));
 	if (n > 0 && ::write(STDOUT_FILENO, text, static_cast<std::size_t>(n)) < 0) {
 	}
 	raise(sig);
@@ -366,19 +374,22 @@ void onFatalSignal(int sig)
 int holdLine(const char *chip, int line, bool active_low)
 {
 	std::setvbuf(stdout, nullptr, _IONBF, 0);
-	struct sigaction stop {};
+	struct sigaction stop {
+	};
 	stop.sa_handler = onStopSignal;
 	sigemptyset(&stop.sa_mask);
 	for (int sig : { SIGTERM, SIGINT, SIGHUP })
 		sigaction(sig, &stop, nullptr);
-	struct sigaction fatal {};
+	struct sigaction fatal {
+	};
 	fatal.sa_handler = onFatalSignal;
 	sigemptyset(&fatal.sa_mask);
 	fatal.sa_flags = static_cast<int>(SA_RESETHAND);
 	for (int sig : { SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT })
 		sigaction(sig, &fatal, nullptr);
 
-	std::snprintf(g_probe_value_path, sizeof(g_probe_value_path), "%s/sim_gpio%d/value", simDir().c_str(), line);
+	std::snprintf(g_probe_value_path, sizeof(g_probe_value_path), "%s/sim_gpio%d/value",
+		      simDir().c_str(), line);
 	GpiodStrobe strobe(chip, line, active_low);
 	if (auto s = strobe.open(); !s) {
 		std::printf("error %s\n", s.message().c_str());
@@ -443,19 +454,21 @@ TEST_F(GpioSimStrobe, OpenByLabelHoldsTheLineAsDockposeOutputDrivenOff)
 	strobe.close();
 	EXPECT_TRUE(contains(gpioinfoLine(), "unused")) << gpioinfoLine();
 	EXPECT_EQ(level(), 1) << "released: back to its pull";
-	strobe.close();	/* idempotent */
+	strobe.close(); /* idempotent */
 }
 
 TEST_F(GpioSimStrobe, ChipByNameNumberPathOrLabel)
 {
 	const std::string chip = simChip();
 	ASSERT_EQ(chip.rfind("gpiochip", 0), 0u) << chip;
-	for (const std::string &arg : { chip, chip.substr(8), "/dev/" + chip, std::string(kLabel) }) {
+	for (const std::string &arg :
+	     { chip, chip.substr(8), "/dev/" + chip, std::string(kLabel) }) {
 		GpiodStrobe strobe(arg, kLine, false, "dockpose-test");
 		const auto status = strobe.open();
 		ASSERT_TRUE(status.isOk()) << arg << ": " << status.message();
 		EXPECT_EQ(strobe.name(), chip + " [dockpose-sim] line 3") << arg;
-		EXPECT_TRUE(contains(gpioinfoLine(), "\"dockpose-test\"")) << arg << ": " << gpioinfoLine();
+		EXPECT_TRUE(contains(gpioinfoLine(), "\"dockpose-test\""))
+			<< arg << ": " << gpioinfoLine();
 	}
 }
 
@@ -545,7 +558,7 @@ TEST_F(GpioSimStrobe, ForceOffLatchesUntilReopened)
 {
 	ASSERT_NO_FATAL_FAILURE(setPull("pull-up"));
 	GpiodStrobe strobe(kLabel, kLine, false);
-	strobe.forceOff();	/* not open: nothing to do, no crash */
+	strobe.forceOff(); /* not open: nothing to do, no crash */
 	ASSERT_TRUE(strobe.open().isOk());
 	ASSERT_TRUE(strobe.set(true).isOk());
 	ASSERT_EQ(level(), 1);
@@ -573,7 +586,8 @@ TEST_F(GpioSimStrobe, HeldLineIsBusyForEveryoneElse)
 	GpiodStrobe second(kLabel, kLine, false);
 	const auto busy = second.open();
 	ASSERT_FALSE(busy.isOk());
-	EXPECT_EQ(busy.message(), "gpio: line 3 on " + simChip() + " is busy (used by \"dockpose\")");
+	EXPECT_EQ(busy.message(),
+		  "gpio: line 3 on " + simChip() + " is busy (used by \"dockpose\")");
 	const CommandResult gpioset = run(std::string("gpioset ") + kLabel + " 3=1");
 	EXPECT_NE(gpioset.status, 0) << "gpioset took a held line: " << gpioset.output;
 
@@ -591,12 +605,15 @@ TEST_F(GpioSimStrobe, WrongChipOrLineIsNamed)
 		std::string message;
 	};
 	const Case cases[] = {
-		{ "no-such-chip", kLine, "gpio: no GPIO chip named or labelled \"no-such-chip\"" + found },
-		{ "gpiochip9", kLine, "gpio: no GPIO chip named or labelled \"gpiochip9\"" + found },
+		{ "no-such-chip", kLine,
+		  "gpio: no GPIO chip named or labelled \"no-such-chip\"" + found },
+		{ "gpiochip9", kLine,
+		  "gpio: no GPIO chip named or labelled \"gpiochip9\"" + found },
 		{ "9", kLine, "gpio: no GPIO chip named or labelled \"9\"" + found },
 		{ "/dev/gpiochip9", kLine, "gpio: no GPIO chip at /dev/gpiochip9" + found },
 		{ "/dev/null", kLine, "gpio: /dev/null is not a GPIO character device" + found },
-		{ kLabel, 8, "gpio: " + simChip() + " [dockpose-sim] has 8 lines; line 8 does not exist" },
+		{ kLabel, 8,
+		  "gpio: " + simChip() + " [dockpose-sim] has 8 lines; line 8 does not exist" },
 		{ kLabel, -1, "gpio: line -1 is not a valid line offset (0 or more)" },
 		{ "", kLine, "gpio: no GPIO chip given" },
 	};
@@ -641,7 +658,8 @@ TEST_F(GpioSimStrobe, SigtermChildSwitchesOffWhileHoldingThenReleases)
 	EXPECT_EQ(level(), 0) << "the child's line after SIGTERM, before release";
 	EXPECT_TRUE(contains(gpioinfoLine(), "\"dockpose\"")) << gpioinfoLine();
 	child.writeLine("go");
-	EXPECT_EQ(child.readLine(kChildGuardMs), "released-at 0") << "the level while close() released it";
+	EXPECT_EQ(child.readLine(kChildGuardMs), "released-at 0")
+		<< "the level while close() released it";
 	const int status = child.wait(kChildGuardMs);
 	ASSERT_NE(status, -1) << "the child did not exit";
 	EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "wait status " << status;
@@ -663,7 +681,8 @@ TEST_F(GpioSimStrobe, FatalSignalHandlerForcesOffBeforeTheProcessDies)
 		EXPECT_EQ(child.readLine(kChildGuardMs), "handler-level 0");
 		const int status = child.wait(kChildGuardMs);
 		ASSERT_NE(status, -1);
-		EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == sig) << "wait status " << status;
+		EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == sig)
+			<< "wait status " << status;
 		EXPECT_EQ(level(), 1) << "the kernel released it: the pull-up";
 		EXPECT_TRUE(contains(gpioinfoLine(), "unused")) << gpioinfoLine();
 	}
@@ -679,7 +698,8 @@ TEST_F(GpioSimStrobe, SigkilledHolderLeavesTheLineToItsPull)
 	const int status = child.wait(kChildGuardMs);
 	ASSERT_NE(status, -1);
 	EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
-	EXPECT_EQ(level(), 0) << "lit until killed, then the pull-down: wire the LED off at the pull";
+	EXPECT_EQ(level(), 0)
+		<< "lit until killed, then the pull-down: wire the LED off at the pull";
 	EXPECT_TRUE(contains(gpioinfoLine(), "unused")) << gpioinfoLine();
 }
 
@@ -688,7 +708,8 @@ TEST_F(GpioSimStrobe, SigkilledHolderLeavesTheLineToItsPull)
 std::string writeDockposedBoard(const std::string &dir)
 {
 	const std::string source = DOCKPOSE_SOURCE_DIR;
-	std::ofstream(dir + "/camera.json") << R"({ "width": 636, "height": 480, "fx": 600.0, "fy": 600.0,
+	std::ofstream(dir + "/camera.json")
+		<< R"({ "width": 636, "height": 480, "fx": 600.0, "fy": 600.0,
   "cx": 317.5, "cy": 239.5, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0 })";
 	std::ofstream board(dir + "/board.json");
 	board << R"({
@@ -700,7 +721,8 @@ std::string writeDockposedBoard(const std::string &dir)
 		"mode": "constant", "pulse_margin_us": 500 },
 	"can": { "backend": "socketcan", "interface": "vcan0", "base_id": "0x300", "bitrate": 500000,
 		"tx_queue_depth": 32, "heartbeat_hz": 10 },
-	"pipeline": { "target": ")" << source << R"(/board/vm/target.json", "mode": "track",
+	"pipeline": { "target": ")"
+	      << source << R"(/board/vm/target.json", "mode": "track",
 		"max_rms_px": 0.6, "min_leds_search": 5, "min_leds_track": 4, "degraded_hold_frames": 30,
 		"lost_after_frames": 3 },
 	"systemd": { "notify": false }
@@ -722,17 +744,23 @@ TEST_F(GpioSimStrobe, DockposedLightsTheLineAndSwitchesItOffOnSigterm)
 	ASSERT_NO_FATAL_FAILURE(setPull("pull-down"));
 	Child daemon({ DOCKPOSED, "--board", board },
 		     { std::string("LD_PRELOAD=") + DOCKPOSE_VM_RELEASE_PROBE_LIB,
-		       "DOCKPOSE_VM_PROBE_VALUE=" + valuePath(), "DOCKPOSE_VM_PROBE_OUT=" + probe_out });
+		       "DOCKPOSE_VM_PROBE_VALUE=" + valuePath(),
+		       "DOCKPOSE_VM_PROBE_OUT=" + probe_out });
 	ASSERT_TRUE(daemon.started()) << DOCKPOSED;
 	/* The strobe in constant mode: lit once dockposed runs (camera started and all). Starting
 	 * takes what the guest gives it (seconds under TCG, more on a loaded host): wait while it
 	 * runs; the guard only ends a hang. */
 	int early_status = -1;
-	const bool lit = waitUntil([&] { return level() == 1 || (early_status = daemon.wait(0)) != -1; },
-				   kDaemonGuardMs) && level() == 1;
-	ASSERT_TRUE(lit) << "dockposed never lit the line"
-			 << (early_status != -1 ? " and exited (wait status " + std::to_string(early_status) + ")" : "")
-			 << "; gpioinfo: " << gpioinfoLine();
+	const bool lit =
+		waitUntil([&] { return level() == 1 || (early_status = daemon.wait(0)) != -1; },
+			  kDaemonGuardMs) &&
+		level() == 1;
+	ASSERT_TRUE(lit)
+		<< "dockposed never lit the line"
+		<< (early_status != -1
+			    ? " and exited (wait status " + std::to_string(early_status) + ")"
+			    : "")
+		<< "; gpioinfo: " << gpioinfoLine();
 	EXPECT_TRUE(contains(gpioinfoLine(), "\"dockpose\"")) << gpioinfoLine();
 
 	ASSERT_NO_FATAL_FAILURE(setPull("pull-up"));
@@ -740,14 +768,16 @@ TEST_F(GpioSimStrobe, DockposedLightsTheLineAndSwitchesItOffOnSigterm)
 	/* It stops at the end of the loop iteration under way (a slow one: seconds); the guard only
 	 * ends a hang. */
 	const int status = daemon.wait(kDaemonGuardMs);
-	ASSERT_NE(status, -1) << "dockposed did not stop within " << kDaemonGuardMs / 1000 << " s of SIGTERM";
+	ASSERT_NE(status, -1)
+		<< "dockposed did not stop within " << kDaemonGuardMs / 1000 << " s of SIGTERM";
 	EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "wait status " << status;
 
 	std::ifstream in(probe_out);
 	std::string word, line_offset, at_release;
 	in >> word >> line_offset >> at_release;
 	EXPECT_EQ(word + " " + line_offset + " " + at_release, "release 3 0")
-		<< "dockposed's line when it released it (probe " << DOCKPOSE_VM_RELEASE_PROBE_LIB << ")";
+		<< "dockposed's line when it released it (probe " << DOCKPOSE_VM_RELEASE_PROBE_LIB
+		<< ")";
 	EXPECT_EQ(level(), 1) << "released: the pull-up";
 	EXPECT_TRUE(contains(gpioinfoLine(), "unused")) << gpioinfoLine();
 	(void)run(std::string("rm -rf ") + dir);
@@ -762,12 +792,15 @@ int main(int argc, char **argv)
 	const ssize_t n = ::readlink("/proc/self/exe", self, sizeof(self) - 1);
 	g_self = n > 0 ? std::string(self, static_cast<std::size_t>(n)) : std::string(argv[0]);
 	if (argc >= 4 && std::strcmp(argv[1], "--hold-line") == 0)
-		return holdLine(argv[2], std::atoi(argv[3]), argc >= 5 && std::strcmp(argv[4], "active-low") == 0);
+		return holdLine(argv[2], std::atoi(argv[3]),
+				argc >= 5 && std::strcmp(argv[4], "active-low") == 0);
 
 	::testing::InitGoogleTest(&argc, argv);
 	if (!std::getenv("DOCKPOSE_VM_ARCH")) {
-		std::fprintf(stderr, "test_vm_gpiod: not inside a dockpose test VM; run it there: "
-				     "scripts/vm run -- %s (or ctest -L vm)\n", argv[0]);
+		std::fprintf(stderr,
+			     "test_vm_gpiod: not inside a dockpose test VM; run it there: "
+			     "scripts/vm run -- %s (or ctest -L vm)\n",
+			     argv[0]);
 		return 77;
 	}
 	if (simChip().empty() || simDir().empty() || level() < 0) {

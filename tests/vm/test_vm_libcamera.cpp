@@ -54,8 +54,8 @@
 #include <libcamera/controls.h>
 
 #include "hal/clock.h"
-#include "vm_shell.h"
 #include "hal/libcamera/libcamera_camera.h"
+#include "vm_shell.h"
 
 /* The replacement operator delete frees what the replacement operator new took from malloc. */
 #pragma GCC diagnostic ignored "-Wmismatched-new-delete"
@@ -65,7 +65,13 @@
 
 namespace {
 
-enum class Caller : int { Ours, Libcamera, Other, Unknown, kCount };
+enum class Caller : int {
+	Ours,
+	Libcamera,
+	Other,
+	Unknown,
+	kCount
+};
 
 struct AllocationCounts {
 	std::array<long, static_cast<std::size_t>(Caller::kCount)> by_caller{};
@@ -83,7 +89,8 @@ thread_local bool t_armed = false;
 thread_local bool t_in_hook = false;
 thread_local AllocationCounts t_counts;
 /* One example call stack per kind of caller, for the report. */
-thread_local std::array<std::array<void *, 24>, static_cast<std::size_t>(Caller::kCount)> t_example{};
+thread_local std::array<std::array<void *, 24>, static_cast<std::size_t>(Caller::kCount)>
+	t_example{};
 thread_local std::array<int, static_cast<std::size_t>(Caller::kCount)> t_example_depth{};
 
 const void *g_program_base = nullptr;
@@ -97,7 +104,8 @@ bool isRuntime(const char *file)
 {
 	const char *base = std::strrchr(file, '/');
 	base = base ? base + 1 : file;
-	for (const char *lib : { "libstdc++.so", "libc.so", "libgcc_s.so", "libm.so", "ld-linux", "libpthread.so" })
+	for (const char *lib :
+	     { "libstdc++.so", "libc.so", "libgcc_s.so", "libm.so", "ld-linux", "libpthread.so" })
 		if (std::strncmp(base, lib, std::strlen(lib)) == 0)
 			return true;
 	return false;
@@ -108,7 +116,8 @@ DOCKPOSE_HOOK Caller classify(void **frames, int depth)
 {
 	for (int i = 0; i < depth; ++i) {
 		const char *address = static_cast<const char *>(frames[i]);
-		if (address >= __start_dockpose_alloc_hooks && address < __stop_dockpose_alloc_hooks)
+		if (address >= __start_dockpose_alloc_hooks &&
+		    address < __stop_dockpose_alloc_hooks)
 			continue;
 		Dl_info info{};
 		if (!dladdr(frames[i], &info) || !info.dli_fname)
@@ -258,10 +267,10 @@ namespace {
 using dockpose::hal::CameraConfig;
 using dockpose::hal::Frame;
 using dockpose::hal::LibcameraCamera;
-using dockpose::hal::WaitResult;
 using dockpose::hal::monotonicNs;
+using dockpose::hal::WaitResult;
 
-constexpr int kWidth = 636;	/* a size vimc delivers (multiples of 6) */
+constexpr int kWidth = 636; /* a size vimc delivers (multiples of 6) */
 constexpr int kHeight = 480;
 /* waitFrame's guard: vimc's next frame comes as soon as the guest can make it; this only ends a
  * hang (a loaded TCG guest may take seconds for the first frame after start()). */
@@ -279,8 +288,10 @@ CommandResult runCam(const std::string &args)
 {
 	CommandResult r = run("cam " + args, 60);
 	if (r.status == 124) {
-		std::fprintf(stderr, "cam %s hung and was killed; running it once more. What it was doing:\n%s\n",
-			     args.c_str(), r.output.c_str());
+		std::fprintf(
+			stderr,
+			"cam %s hung and was killed; running it once more. What it was doing:\n%s\n",
+			args.c_str(), r.output.c_str());
 		r = run("cam " + args, 60);
 	}
 	return r;
@@ -295,7 +306,8 @@ std::vector<std::string> camToolIds()
 	while (std::getline(in, line)) {
 		const std::size_t open = line.find(" (");
 		const std::size_t close = line.rfind(')');
-		if (line.find(": '") != std::string::npos && open != std::string::npos && close > open)
+		if (line.find(": '") != std::string::npos && open != std::string::npos &&
+		    close > open)
 			ids.push_back(line.substr(open + 2, close - open - 2));
 	}
 	return ids;
@@ -313,7 +325,8 @@ CameraConfig smallConfig()
 std::vector<std::uint8_t> readBinary(const std::string &path)
 {
 	std::ifstream in(path, std::ios::binary);
-	return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+	return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(in),
+					 std::istreambuf_iterator<char>());
 }
 
 /* Files in dir whose name starts with prefix, sorted. */
@@ -338,23 +351,26 @@ std::uint8_t referenceLuma(int r, int g, int b)
 }
 
 /* An intensity image from a packed 24-bit buffer; r_first: bytes R, G, B (libcamera BGR888). */
-std::vector<std::uint8_t> referenceIntensity(const std::vector<std::uint8_t> &data, int width, int height,
-					     int stride, bool r_first)
+std::vector<std::uint8_t> referenceIntensity(const std::vector<std::uint8_t> &data, int width,
+					     int height, int stride, bool r_first)
 {
-	std::vector<std::uint8_t> out(static_cast<std::size_t>(width) * static_cast<std::size_t>(height));
+	std::vector<std::uint8_t> out(static_cast<std::size_t>(width) *
+				      static_cast<std::size_t>(height));
 	for (int y = 0; y < height; ++y) {
-		const std::uint8_t *row = data.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(stride);
+		const std::uint8_t *row = data.data() + static_cast<std::size_t>(y) *
+								static_cast<std::size_t>(stride);
 		for (int x = 0; x < width; ++x) {
 			const std::uint8_t *p = row + 3 * x;
 			out[static_cast<std::size_t>(y * width + x)] =
-				r_first ? referenceLuma(p[0], p[1], p[2]) : referenceLuma(p[2], p[1], p[0]);
+				r_first ? referenceLuma(p[0], p[1], p[2])
+					: referenceLuma(p[2], p[1], p[0]);
 		}
 	}
 	return out;
 }
 
 struct Box {
-	int x0 = 0, y0 = 0, x1 = -1, y1 = -1;	/* inclusive; empty when x1 < x0 */
+	int x0 = 0, y0 = 0, x1 = -1, y1 = -1; /* inclusive; empty when x1 < x0 */
 	bool contains(int x, int y) const { return x >= x0 && x <= x1 && y >= y0 && y <= y1; }
 	long area() const { return x1 < x0 ? 0 : static_cast<long>(x1 - x0 + 1) * (y1 - y0 + 1); }
 };
@@ -372,7 +388,8 @@ std::vector<std::uint8_t> captureOneIntensityFrame(LibcameraCamera &camera, int 
 		if (i == 1) {
 			*stride_bytes = frame.image.stride_bytes;
 			for (int y = 0; y < frame.image.height; ++y)
-				copy.insert(copy.end(), frame.image.row(y), frame.image.row(y) + frame.image.width);
+				copy.insert(copy.end(), frame.image.row(y),
+					    frame.image.row(y) + frame.image.width);
 		}
 		camera.releaseFrame(frame);
 	}
@@ -415,7 +432,8 @@ TEST(VimcLibcamera, OpensTheCameraCamListsByIdAndByIndex)
 	ASSERT_TRUE(by_id.start().isOk()) << by_id.lastError();
 	for (int i = 0; i < 2; ++i) {
 		Frame frame;
-		ASSERT_EQ(by_id.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame) << by_id.lastError();
+		ASSERT_EQ(by_id.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame)
+			<< by_id.lastError();
 		EXPECT_EQ(frame.image.width, 1920);
 		EXPECT_EQ(frame.image.height, 1080);
 		by_id.releaseFrame(frame);
@@ -441,14 +459,17 @@ TEST(VimcLibcamera, IndexZeroIsTheSameCameraAndWrongOnesAreNamed)
 	CameraConfig config;
 	config.index = 1;
 	auto status = camera.configure(config);
-	EXPECT_EQ(status.message(), "libcamera: camera index 1 out of range (1 camera: " + ids[0] + ")");
+	EXPECT_EQ(status.message(),
+		  "libcamera: camera index 1 out of range (1 camera: " + ids[0] + ")");
 	EXPECT_EQ(camera.lastError(), status.message());
 	EXPECT_EQ(camera.start().message(), "libcamera: start() before a successful configure()");
 
 	config.index = 0;
 	config.id = "platform/vimc.0 Sensor A";
 	status = camera.configure(config);
-	EXPECT_EQ(status.message(), "libcamera: no camera with id \"platform/vimc.0 Sensor A\" (cameras: " + ids[0] + ")");
+	EXPECT_EQ(status.message(),
+		  "libcamera: no camera with id \"platform/vimc.0 Sensor A\" (cameras: " + ids[0] +
+			  ")");
 
 	/* vimc sizes are multiples of 6: 640x480 cannot be had, and the nearest is named. */
 	config.id.clear();
@@ -456,7 +477,8 @@ TEST(VimcLibcamera, IndexZeroIsTheSameCameraAndWrongOnesAreNamed)
 	config.height = 480;
 	status = camera.configure(config);
 	ASSERT_FALSE(status.isOk());
-	EXPECT_NE(status.message().find("cannot deliver 640x480 BGR888 (nearest 636x480"), std::string::npos)
+	EXPECT_NE(status.message().find("cannot deliver 640x480 BGR888 (nearest 636x480"),
+		  std::string::npos)
 		<< status.message();
 
 	/* The same object configures fine afterwards. */
@@ -495,7 +517,8 @@ TEST(VimcLibcamera, CapturesOverStopStartCyclesReusingTheSameRequests)
 		std::int64_t last_timestamp_ns = 0;
 		std::set<std::int32_t> slots;
 		for (int i = 0; i < kFramesPerCycle; ++i) {
-			ASSERT_EQ(camera.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame) << camera.lastError();
+			ASSERT_EQ(camera.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame)
+				<< camera.lastError();
 			const std::int64_t now_ns = monotonicNs();
 			++frames_seen;
 			EXPECT_TRUE(frame.image.valid());
@@ -510,10 +533,13 @@ TEST(VimcLibcamera, CapturesOverStopStartCyclesReusingTheSameRequests)
 			 * start() (the sensor timestamp, less the exposure, of a frame captured after
 			 * it), however long the guest took to deliver the frame. */
 			EXPECT_LE(frame.timestamp_ns, now_ns);
-			EXPECT_GE(frame.timestamp_ns, started_ns - static_cast<std::int64_t>(frame.exposure_us) * 1000)
-				<< "exposure started " << (started_ns - frame.timestamp_ns) / 1000 << " us before start()";
+			EXPECT_GE(frame.timestamp_ns,
+				  started_ns - static_cast<std::int64_t>(frame.exposure_us) * 1000)
+				<< "exposure started " << (started_ns - frame.timestamp_ns) / 1000
+				<< " us before start()";
 			if (!camera.manualControlsSupported()) {
-				EXPECT_EQ(frame.exposure_us, exposure_us) << "vimc reports none: the requested one";
+				EXPECT_EQ(frame.exposure_us, exposure_us)
+					<< "vimc reports none: the requested one";
 			}
 			EXPECT_GE(frame.slot, 0);
 			EXPECT_LT(frame.slot, static_cast<std::int32_t>(requests));
@@ -527,7 +553,8 @@ TEST(VimcLibcamera, CapturesOverStopStartCyclesReusingTheSameRequests)
 		EXPECT_EQ(camera.waitFrame(&frame, 100), WaitResult::Stopped);
 		EXPECT_EQ(camera.requestCount(), requests) << "no request made again";
 		const std::uint64_t queued = camera.requestsQueued();
-		EXPECT_GE(queued, queued_before + kFramesPerCycle) << "every frame's request queued again";
+		EXPECT_GE(queued, queued_before + kFramesPerCycle)
+			<< "every frame's request queued again";
 		queued_before = queued;
 		EXPECT_EQ(camera.queueFailures(), 0u);
 	}
@@ -535,10 +562,11 @@ TEST(VimcLibcamera, CapturesOverStopStartCyclesReusingTheSameRequests)
 	EXPECT_FALSE(camera.setControls(1000, 0.5).isOk());
 	EXPECT_EQ(camera.stats().frames, frames_seen);
 	EXPECT_EQ(camera.stats().errors, 0u);
-	std::printf("[          ] %d cycles: %llu frames, %llu requests queued over %zu requests, %llu dropped\n",
-		    kCycles, static_cast<unsigned long long>(frames_seen),
-		    static_cast<unsigned long long>(camera.requestsQueued()), requests,
-		    static_cast<unsigned long long>(camera.stats().dropped));
+	std::printf(
+		"[          ] %d cycles: %llu frames, %llu requests queued over %zu requests, %llu dropped\n",
+		kCycles, static_cast<unsigned long long>(frames_seen),
+		static_cast<unsigned long long>(camera.requestsQueued()), requests,
+		static_cast<unsigned long long>(camera.stats().dropped));
 }
 
 TEST(VimcLibcamera, FrameHeldAcrossStopStaysValidUntilReleased)
@@ -547,16 +575,19 @@ TEST(VimcLibcamera, FrameHeldAcrossStopStaysValidUntilReleased)
 	ASSERT_TRUE(camera.configure(smallConfig()).isOk()) << camera.lastError();
 	ASSERT_TRUE(camera.start().isOk()) << camera.lastError();
 	Frame frame;
-	ASSERT_EQ(camera.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame) << camera.lastError();
+	ASSERT_EQ(camera.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame)
+		<< camera.lastError();
 	std::vector<std::uint8_t> before(frame.image.data, frame.image.data + frame.image.width);
 	camera.stop();
-	const std::vector<std::uint8_t> after(frame.image.data, frame.image.data + frame.image.width);
+	const std::vector<std::uint8_t> after(frame.image.data,
+					      frame.image.data + frame.image.width);
 	EXPECT_EQ(before, after) << "the held frame changed under the frame thread";
 	camera.releaseFrame(frame);
-	camera.releaseFrame(frame);	/* twice: ignored */
+	camera.releaseFrame(frame); /* twice: ignored */
 
 	ASSERT_TRUE(camera.start().isOk()) << camera.lastError();
-	ASSERT_EQ(camera.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame) << camera.lastError();
+	ASSERT_EQ(camera.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame)
+		<< camera.lastError();
 	camera.releaseFrame(frame);
 	EXPECT_EQ(camera.queueFailures(), 0u);
 }
@@ -565,11 +596,13 @@ TEST(VimcLibcamera, IntensityEqualsOwnConversionOfWhatCamCaptured)
 {
 	char dir[] = "/tmp/vimc-XXXXXX";
 	ASSERT_NE(mkdtemp(dir), nullptr);
-	const std::string size = "width=" + std::to_string(kWidth) + ",height=" + std::to_string(kHeight);
+	const std::string size =
+		"width=" + std::to_string(kWidth) + ",height=" + std::to_string(kHeight);
 	for (const char *format : { "BGR888", "RGB888" }) {
 		/* (That cam really used each format shows below: the two must match with red and blue swapped.) */
-		const CommandResult cam = runCam("-c 1 --capture=2 -s " + size + ",pixelformat=" + format + " --file=" +
-					      dir + "/" + format + "-#.bin");
+		const CommandResult cam =
+			runCam("-c 1 --capture=2 -s " + size + ",pixelformat=" + format +
+			       " --file=" + dir + "/" + format + "-#.bin");
 		ASSERT_EQ(cam.status, 0) << cam.output;
 	}
 	const std::vector<std::string> bgr = filesStartingWith(dir, "BGR888-");
@@ -594,7 +627,8 @@ TEST(VimcLibcamera, IntensityEqualsOwnConversionOfWhatCamCaptured)
 		ASSERT_EQ(camera.pixelFormatName(), "BGR888");
 		EXPECT_EQ(camera.strideBytes(), cam_stride) << "the stride cam saw";
 		ours = captureOneIntensityFrame(camera, &stride);
-		ASSERT_EQ(ours.size(), static_cast<std::size_t>(kWidth * kHeight)) << camera.lastError();
+		ASSERT_EQ(ours.size(), static_cast<std::size_t>(kWidth * kHeight))
+			<< camera.lastError();
 		EXPECT_EQ(stride, kWidth) << "converted frames are packed";
 	}
 
@@ -613,15 +647,20 @@ TEST(VimcLibcamera, IntensityEqualsOwnConversionOfWhatCamCaptured)
 	if (varying.area() > 0) {
 		constexpr int kMargin = 24;
 		varying = Box{ std::max(0, varying.x0 - kMargin), std::max(0, varying.y0 - kMargin),
-			       std::min(kWidth - 1, varying.x1 + kMargin), std::min(kHeight - 1, varying.y1 + kMargin) };
+			       std::min(kWidth - 1, varying.x1 + kMargin),
+			       std::min(kHeight - 1, varying.y1 + kMargin) };
 	}
 	const long pixels = static_cast<long>(kWidth) * kHeight;
-	EXPECT_LT(varying.area(), pixels / 10) << "vimc frames differ in a large region: " << varying.x0 << ","
-					       << varying.y0 << " - " << varying.x1 << "," << varying.y1;
+	EXPECT_LT(varying.area(), pixels / 10)
+		<< "vimc frames differ in a large region: " << varying.x0 << "," << varying.y0
+		<< " - " << varying.x1 << "," << varying.y1;
 
-	const std::vector<std::uint8_t> from_bgr = referenceIntensity(bgr0, kWidth, kHeight, cam_stride, true);
-	const std::vector<std::uint8_t> from_rgb = referenceIntensity(rgb0, kWidth, kHeight, cam_stride, false);
-	const std::vector<std::uint8_t> swapped = referenceIntensity(bgr0, kWidth, kHeight, cam_stride, false);
+	const std::vector<std::uint8_t> from_bgr =
+		referenceIntensity(bgr0, kWidth, kHeight, cam_stride, true);
+	const std::vector<std::uint8_t> from_rgb =
+		referenceIntensity(rgb0, kWidth, kHeight, cam_stride, false);
+	const std::vector<std::uint8_t> swapped =
+		referenceIntensity(bgr0, kWidth, kHeight, cam_stride, false);
 	long compared = 0, off_bgr = 0, off_rgb = 0, off_swapped = 0;
 	std::set<int> levels;
 	std::string first_mismatch;
@@ -635,7 +674,8 @@ TEST(VimcLibcamera, IntensityEqualsOwnConversionOfWhatCamCaptured)
 			if (std::abs(ours[i] - from_bgr[i]) > 1) {
 				if (off_bgr++ == 0) {
 					char text[96];
-					std::snprintf(text, sizeof(text), "(%d,%d): ours %d, cam BGR888 %d", x, y,
+					std::snprintf(text, sizeof(text),
+						      "(%d,%d): ours %d, cam BGR888 %d", x, y,
 						      ours[i], from_bgr[i]);
 					first_mismatch = text;
 				}
@@ -643,14 +683,17 @@ TEST(VimcLibcamera, IntensityEqualsOwnConversionOfWhatCamCaptured)
 			off_rgb += std::abs(ours[i] - from_rgb[i]) > 1;
 			off_swapped += std::abs(ours[i] - swapped[i]) > 2;
 		}
-	std::printf("[          ] compared %ld of %ld pixels (vimc's changing text excluded); %zu grey levels\n",
-		    compared, pixels, levels.size());
+	std::printf(
+		"[          ] compared %ld of %ld pixels (vimc's changing text excluded); %zu grey levels\n",
+		compared, pixels, levels.size());
 	EXPECT_GT(compared, pixels * 9 / 10);
 	EXPECT_GE(levels.size(), 6u) << "a test pattern with several levels, not a flat frame";
-	EXPECT_EQ(off_bgr, 0) << "pixels off by more than 1 from cam's BGR888 frame, first " << first_mismatch;
+	EXPECT_EQ(off_bgr, 0)
+		<< "pixels off by more than 1 from cam's BGR888 frame, first " << first_mismatch;
 	EXPECT_EQ(off_rgb, 0) << "pixels off by more than 1 from cam's RGB888 frame";
 	/* The check can see a red/blue swap. */
-	EXPECT_GT(off_swapped, compared / 5) << "swapping red and blue would hardly change this frame";
+	EXPECT_GT(off_swapped, compared / 5)
+		<< "swapping red and blue would hardly change this frame";
 }
 
 TEST(VimcLibcamera, CountingHooksAttributeAllocationsToTheirCaller)
@@ -659,9 +702,9 @@ TEST(VimcLibcamera, CountingHooksAttributeAllocationsToTheirCaller)
 	GTEST_SKIP() << "allocations are not counted under the sanitizers (DOCKPOSE_SANITIZE)";
 #endif
 	arm();
-	auto *ours = new std::string(100, 'x');	/* via libstdc++: attributed past it, to us */
+	auto *ours = new std::string(100, 'x'); /* via libstdc++: attributed past it, to us */
 	libcamera::ControlList controls;
-	controls.set(libcamera::controls::ExposureTime, 100);	/* libcamera's unordered_map */
+	controls.set(libcamera::controls::ExposureTime, 100); /* libcamera's unordered_map */
 	disarm();
 	const AllocationCounts c = takeCounts();
 	delete ours;
@@ -679,8 +722,9 @@ TEST(VimcLibcamera, FramePathAllocatesNothingOfOurOwnInSteadyState)
 	ASSERT_TRUE(camera.configure(smallConfig()).isOk()) << camera.lastError();
 	ASSERT_TRUE(camera.start().isOk()) << camera.lastError();
 	Frame frame;
-	for (int i = 0; i < 10; ++i) {	/* warm up */
-		ASSERT_EQ(camera.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame) << camera.lastError();
+	for (int i = 0; i < 10; ++i) { /* warm up */
+		ASSERT_EQ(camera.waitFrame(&frame, kFrameTimeoutMs), WaitResult::Frame)
+			<< camera.lastError();
 		camera.releaseFrame(frame);
 	}
 
@@ -701,26 +745,31 @@ TEST(VimcLibcamera, FramePathAllocatesNothingOfOurOwnInSteadyState)
 			wait_total.by_caller[k] += w.by_caller[k];
 			release_total.by_caller[k] += rel.by_caller[k];
 		}
-		max_libcamera_per_frame = std::max(max_libcamera_per_frame,
-						   w.of(Caller::Libcamera) + rel.of(Caller::Libcamera) +
-							   w.of(Caller::Other) + rel.of(Caller::Other));
+		max_libcamera_per_frame =
+			std::max(max_libcamera_per_frame,
+				 w.of(Caller::Libcamera) + rel.of(Caller::Libcamera) +
+					 w.of(Caller::Other) + rel.of(Caller::Other));
 	}
 	camera.stop();
 
-	std::printf("[          ] %d frames; waitFrame: ours %ld, libcamera %ld, other %ld; releaseFrame: ours %ld, "
-		    "libcamera %ld, other %ld; at most %ld of libcamera's per frame\n",
-		    kFrames, wait_total.of(Caller::Ours), wait_total.of(Caller::Libcamera), wait_total.of(Caller::Other),
-		    release_total.of(Caller::Ours), release_total.of(Caller::Libcamera), release_total.of(Caller::Other),
-		    max_libcamera_per_frame);
+	std::printf(
+		"[          ] %d frames; waitFrame: ours %ld, libcamera %ld, other %ld; releaseFrame: ours %ld, "
+		"libcamera %ld, other %ld; at most %ld of libcamera's per frame\n",
+		kFrames, wait_total.of(Caller::Ours), wait_total.of(Caller::Libcamera),
+		wait_total.of(Caller::Other), release_total.of(Caller::Ours),
+		release_total.of(Caller::Libcamera), release_total.of(Caller::Other),
+		max_libcamera_per_frame);
 	EXPECT_EQ(wait_total.of(Caller::Ours) + release_total.of(Caller::Ours), 0)
-		<< "our code allocated in the frame path, e.g.:\n" << exampleStack(Caller::Ours);
+		<< "our code allocated in the frame path, e.g.:\n"
+		<< exampleStack(Caller::Ours);
 	EXPECT_EQ(wait_total.of(Caller::Unknown) + release_total.of(Caller::Unknown), 0)
 		<< exampleStack(Caller::Unknown);
 	/* libcamera's own (Request::reuse, Camera::queueRequest): a few per requeued request. */
 	EXPECT_LE(max_libcamera_per_frame, 16) << exampleStack(Caller::Libcamera);
 	if (release_total.of(Caller::Libcamera) > 0)
-		std::printf("[          ] libcamera allocates when a request is queued again, e.g.:\n%s",
-			    exampleStack(Caller::Libcamera).c_str());
+		std::printf(
+			"[          ] libcamera allocates when a request is queued again, e.g.:\n%s",
+			exampleStack(Caller::Libcamera).c_str());
 }
 
 int programMarker()
@@ -734,8 +783,10 @@ int main(int argc, char **argv)
 {
 	::testing::InitGoogleTest(&argc, argv);
 	if (!std::getenv("DOCKPOSE_VM_ARCH")) {
-		std::fprintf(stderr, "test_vm_libcamera: not inside a dockpose test VM; run it there: "
-				     "scripts/vm run -- %s (or ctest -L vm)\n", argv[0]);
+		std::fprintf(stderr,
+			     "test_vm_libcamera: not inside a dockpose test VM; run it there: "
+			     "scripts/vm run -- %s (or ctest -L vm)\n",
+			     argv[0]);
 		return 77;
 	}
 	Dl_info info{};

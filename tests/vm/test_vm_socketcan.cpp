@@ -33,9 +33,9 @@
 #include <linux/rtnetlink.h>
 #include <net/if.h>
 #include <signal.h>
+#include <spawn.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
-#include <spawn.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -57,8 +57,8 @@
 #include <gtest/gtest.h>
 
 #include "hal/clock.h"
-#include "vm_shell.h"
 #include "hal/socketcan/socketcan_bus.h"
+#include "vm_shell.h"
 
 extern char **environ;
 
@@ -68,21 +68,20 @@ using dockpose::hal::CanFilter;
 using dockpose::hal::CanFrame;
 using dockpose::hal::CanOptions;
 using dockpose::hal::CanState;
-using dockpose::hal::CanStats;
-using dockpose::hal::SocketCanBus;
 using dockpose::hal::canStateName;
+using dockpose::hal::CanStats;
 using dockpose::hal::monotonicNs;
+using dockpose::hal::SocketCanBus;
 
 using dockpose::vmtest::CommandResult;
 using dockpose::vmtest::mustRun;
 using dockpose::vmtest::run;
 using dockpose::vmtest::waitUntil;
 
-
-
 bool interfaceExists(const std::string &name)
 {
-	struct stat st {};
+	struct stat st {
+	};
 	return stat(("/sys/class/net/" + name).c_str(), &st) == 0;
 }
 
@@ -102,7 +101,8 @@ void restoreVcan1()
 	(void)run("ip link set vcan1 up");
 }
 
-CanFrame classicFrame(std::uint32_t id, std::initializer_list<std::uint8_t> bytes, bool extended = false)
+CanFrame classicFrame(std::uint32_t id, std::initializer_list<std::uint8_t> bytes,
+		      bool extended = false)
 {
 	CanFrame f;
 	f.id = id;
@@ -115,7 +115,8 @@ CanFrame classicFrame(std::uint32_t id, std::initializer_list<std::uint8_t> byte
 /* A frame numbered seq: id, then seq in the first two data bytes. */
 CanFrame numberedFrame(std::uint32_t id, int seq)
 {
-	return classicFrame(id, { static_cast<std::uint8_t>(seq >> 8), static_cast<std::uint8_t>(seq & 0xff), 0xa5 });
+	return classicFrame(id, { static_cast<std::uint8_t>(seq >> 8),
+				  static_cast<std::uint8_t>(seq & 0xff), 0xa5 });
 }
 
 int seqOf(const CanFrame &f)
@@ -144,18 +145,21 @@ std::vector<CanFrame> receiveFrames(SocketCanBus &bus, std::size_t n, int timeou
 				    std::int64_t *longest_receive_ns = nullptr)
 {
 	std::vector<CanFrame> frames;
-	waitUntil([&] {
-		CanFrame f;
-		while (frames.size() < n) {
-			const std::int64_t t0 = monotonicNs();
-			if (!bus.receive(&f))
-				break;
-			if (longest_receive_ns)
-				*longest_receive_ns = std::max(*longest_receive_ns, monotonicNs() - t0);
-			frames.push_back(f);
-		}
-		return frames.size() >= n;
-	}, timeout_ms);
+	waitUntil(
+		[&] {
+			CanFrame f;
+			while (frames.size() < n) {
+				const std::int64_t t0 = monotonicNs();
+				if (!bus.receive(&f))
+					break;
+				if (longest_receive_ns)
+					*longest_receive_ns =
+						std::max(*longest_receive_ns, monotonicNs() - t0);
+				frames.push_back(f);
+			}
+			return frames.size() >= n;
+		},
+		timeout_ms);
 	return frames;
 }
 
@@ -200,7 +204,8 @@ int allFrameListeners(const std::string &interface)
 class Candump
 {
 public:
-	Candump(std::string interface, int count) : interface_(std::move(interface))
+	Candump(std::string interface, int count)
+		: interface_(std::move(interface))
 	{
 		char path[] = "/tmp/candump-XXXXXX";
 		const int fd = mkstemp(path);
@@ -223,7 +228,9 @@ public:
 		posix_spawn_file_actions_destroy(&actions);
 		::close(fd);
 		/* Ready once its socket is bound: one more listener for every frame. */
-		ready_ = pid_ > 0 && waitUntil([&] { return allFrameListeners(interface_) > listeners; }, 10000);
+		ready_ =
+			pid_ > 0 &&
+			waitUntil([&] { return allFrameListeners(interface_) > listeners; }, 10000);
 	}
 	~Candump()
 	{
@@ -241,7 +248,8 @@ public:
 	{
 		if (pid_ > 0) {
 			int status = 0;
-			if (!waitUntil([&] { return ::waitpid(pid_, &status, WNOHANG) == pid_; }, timeout_ms)) {
+			if (!waitUntil([&] { return ::waitpid(pid_, &status, WNOHANG) == pid_; },
+				       timeout_ms)) {
 				::kill(pid_, SIGTERM);
 				::waitpid(pid_, &status, 0);
 			}
@@ -293,7 +301,8 @@ TEST(VcanSocketCan, SentFramesReachCandumpAndASecondSocketUnchanged)
 	sent.push_back(classicFrame(0x7ff, { 0xde, 0xad, 0xbe, 0xef, 0x01, 0x02, 0x03, 0x04 }));
 	sent.push_back(classicFrame(0x18daf1ab, { 0x11, 0x22 }, true));
 	sent.push_back(classicFrame(0x1fffffff, { 0x00 }, true));
-	sent.push_back(classicFrame(0x00000123, { 0x33 }, true));	/* 29-bit id 0x123, not 11-bit 0x123 */
+	sent.push_back(
+		classicFrame(0x00000123, { 0x33 }, true)); /* 29-bit id 0x123, not 11-bit 0x123 */
 	for (int i = 0; i < 20; ++i)
 		sent.push_back(numberedFrame(0x300 + static_cast<std::uint32_t>(i % 16), i));
 
@@ -305,16 +314,19 @@ TEST(VcanSocketCan, SentFramesReachCandumpAndASecondSocketUnchanged)
 		EXPECT_TRUE(bus.send(f)) << bus.lastError();
 
 	std::int64_t longest_receive_ns = 0;
-	const std::vector<CanFrame> got = receiveFrames(witness, sent.size(), 5000, &longest_receive_ns);
+	const std::vector<CanFrame> got =
+		receiveFrames(witness, sent.size(), 5000, &longest_receive_ns);
 	const std::int64_t after_ns = monotonicNs();
-	ASSERT_EQ(got.size(), sent.size()) << "the second socket got " << got.size() << " of " << sent.size();
+	ASSERT_EQ(got.size(), sent.size())
+		<< "the second socket got " << got.size() << " of " << sent.size();
 	for (std::size_t i = 0; i < sent.size(); ++i) {
 		SCOPED_TRACE("frame " + std::to_string(i) + " " + candumpText(sent[i]));
 		EXPECT_EQ(got[i].id, sent[i].id);
 		EXPECT_EQ(got[i].extended, sent[i].extended);
 		EXPECT_FALSE(got[i].fd);
 		ASSERT_EQ(got[i].len, sent[i].len);
-		EXPECT_TRUE(std::equal(got[i].data.begin(), got[i].data.begin() + got[i].len, sent[i].data.begin()));
+		EXPECT_TRUE(std::equal(got[i].data.begin(), got[i].data.begin() + got[i].len,
+				       sent[i].data.begin()));
 		/* Kernel reception time moved onto CLOCK_MONOTONIC: within the sending window. The
 		 * move reads CLOCK_MONOTONIC, then CLOCK_REALTIME, inside receive(): it can only
 		 * come out early, by the time between the two reads, which is less than that
@@ -355,12 +367,13 @@ TEST(VcanSocketCan, FdFramesTravelPaddedToACanFdLength)
 	CanFrame fd_frame;
 	fd_frame.id = 0x456;
 	fd_frame.fd = true;
-	fd_frame.len = 10;	/* goes as 12 bytes, the last two zero */
+	fd_frame.len = 10; /* goes as 12 bytes, the last two zero */
 	for (int i = 0; i < 10; ++i)
 		fd_frame.data[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(0xf0 + i);
 	EXPECT_FALSE(classic.send(fd_frame)) << "an FD frame on a bus opened without fd";
 	EXPECT_EQ(classic.stats().tx_errors, 1u);
-	EXPECT_NE(classic.lastError().find("opened without fd"), std::string::npos) << classic.lastError();
+	EXPECT_NE(classic.lastError().find("opened without fd"), std::string::npos)
+		<< classic.lastError();
 
 	SocketCanBus bus("vcan0");
 	CanOptions options;
@@ -388,7 +401,7 @@ TEST(VcanSocketCan, FdFramesTravelPaddedToACanFdLength)
 	padded.len = 12;
 	const std::vector<std::string> logged = candump.stop();
 	ASSERT_EQ(logged.size(), 2u);
-	const std::string expected = candumpText(padded);	/* flags written as 0 */
+	const std::string expected = candumpText(padded); /* flags written as 0 */
 	const std::size_t flags_at = expected.find("##") + 2;
 	ASSERT_GT(logged[0].size(), flags_at) << logged[0];
 	const int flags = std::stoi(logged[0].substr(flags_at, 1), nullptr, 16);
@@ -415,16 +428,16 @@ TEST(VcanSocketCan, KernelFiltersPassOnlyMatchingFramesFromCansend)
 	};
 	const Case cases[] = {
 		{ "105#0102", true },
-		{ "115#0102", false },		/* outside the 11-bit range */
+		{ "115#0102", false }, /* outside the 11-bit range */
 		{ "10F#", true },
-		{ "00000105#0102", false },	/* 29-bit id 0x105: not the 11-bit filter's kind */
-		{ "105#R", false },		/* remote frame: never */
+		{ "00000105#0102", false }, /* 29-bit id 0x105: not the 11-bit filter's kind */
+		{ "105#R", false }, /* remote frame: never */
 		{ "18DAF1AB#DEADBEEF", true },
-		{ "18DAF2AB#DEADBEEF", false },	/* outside the 29-bit range */
+		{ "18DAF2AB#DEADBEEF", false }, /* outside the 29-bit range */
 		{ "1FFFFFFF#00", false },
 		{ "7FF#00", false },
 		{ "18DAF100#", true },
-		{ "100#FFFFFFFFFFFFFFFF", true },	/* the last one: all arrived once it did */
+		{ "100#FFFFFFFFFFFFFFFF", true }, /* the last one: all arrived once it did */
 	};
 	std::vector<std::string> expected;
 	for (const Case &c : cases) {
@@ -440,9 +453,11 @@ TEST(VcanSocketCan, KernelFiltersPassOnlyMatchingFramesFromCansend)
 	for (std::size_t i = 0; i < got.size(); ++i)
 		EXPECT_EQ(candumpText(got[i]), expected[i]) << "frame " << i;
 	CanFrame extra;
-	EXPECT_FALSE(bus.receive(&extra)) << "a frame passed the filters that should not: " << candumpText(extra);
+	EXPECT_FALSE(bus.receive(&extra))
+		<< "a frame passed the filters that should not: " << candumpText(extra);
 	EXPECT_EQ(bus.stats().rx_frames, expected.size());
-	EXPECT_FALSE(deaf.receive(&extra)) << "an empty filter list received " << candumpText(extra);
+	EXPECT_FALSE(deaf.receive(&extra))
+		<< "an empty filter list received " << candumpText(extra);
 	EXPECT_EQ(deaf.stats().rx_frames, 0u);
 }
 
@@ -454,8 +469,10 @@ TEST(VcanSocketCan, KernelFiltersPassOnlyMatchingFramesFromCansend)
 class TcRequest
 {
 public:
-	TcRequest(std::uint16_t type, std::uint16_t flags, int ifindex, std::uint32_t handle, std::uint32_t parent)
-		: type_(type), flags_(flags)
+	TcRequest(std::uint16_t type, std::uint16_t flags, int ifindex, std::uint32_t handle,
+		  std::uint32_t parent)
+		: type_(type),
+		  flags_(flags)
 	{
 		size_ = NLMSG_HDRLEN;
 		tcmsg tc{};
@@ -504,8 +521,9 @@ public:
 		int err = 0;
 		if (overflow_) {
 			err = EMSGSIZE;
-		} else if (::sendto(fd, buf_.data(), size_, 0, reinterpret_cast<const sockaddr *>(&kernel),
-			     sizeof(kernel)) < 0) {
+		} else if (::sendto(fd, buf_.data(), size_, 0,
+				    reinterpret_cast<const sockaddr *>(&kernel),
+				    sizeof(kernel)) < 0) {
 			err = errno;
 		} else {
 			alignas(nlmsghdr) std::array<char, 4096> reply;
@@ -561,7 +579,8 @@ public:
 	/* Why it cannot be set up here, or "" when it can. */
 	static std::string unavailable()
 	{
-		struct stat st {};
+		struct stat st {
+		};
 		if (stat("/proc/net/psched", &st) != 0)
 			return "this kernel has no traffic control (CONFIG_NET_SCHED, CONFIG_NET_SCH_TBF in "
 			       "tests/vm/kernel/<arch>.fragment): without a slow qdisc vcan never refuses a frame";
@@ -575,11 +594,12 @@ public:
 		ASSERT_NO_FATAL_FAILURE(setTxQueueLen(kTxQueueLen));
 
 		tc_tbf_qopt parms{};
-		parms.rate.rate = 1000 / 8;	/* bytes/s */
+		parms.rate.rate = 1000 / 8; /* bytes/s */
 		parms.rate.linklayer = TC_LINKLAYER_ETHERNET;
-		parms.limit = 64;		/* a bfifo until the pfifo replaces it */
-		const std::uint32_t burst = 32;	/* bytes */
-		TcRequest tbf(RTM_NEWQDISC, NLM_F_CREATE | NLM_F_EXCL, ifindex_, TC_H_MAKE(1u << 16, 0), TC_H_ROOT);
+		parms.limit = 64; /* a bfifo until the pfifo replaces it */
+		const std::uint32_t burst = 32; /* bytes */
+		TcRequest tbf(RTM_NEWQDISC, NLM_F_CREATE | NLM_F_EXCL, ifindex_,
+			      TC_H_MAKE(1u << 16, 0), TC_H_ROOT);
 		tbf.attribute(TCA_KIND, "tbf", 4);
 		const std::size_t options = tbf.begin(TCA_OPTIONS);
 		tbf.attribute(TCA_TBF_PARMS, &parms, sizeof(parms));
@@ -590,8 +610,8 @@ public:
 		active_ = true;
 
 		/* No options: its limit is the interface's txqueuelen. */
-		TcRequest pfifo(RTM_NEWQDISC, NLM_F_CREATE | NLM_F_EXCL, ifindex_, TC_H_MAKE(0x10u << 16, 0),
-				TC_H_MAKE(1u << 16, 1));
+		TcRequest pfifo(RTM_NEWQDISC, NLM_F_CREATE | NLM_F_EXCL, ifindex_,
+				TC_H_MAKE(0x10u << 16, 0), TC_H_MAKE(1u << 16, 1));
 		pfifo.attribute(TCA_KIND, "pfifo", 6);
 		const int pfifo_err = pfifo.send();
 		ASSERT_EQ(pfifo_err, 0) << "adding pfifo under tbf: " << std::strerror(pfifo_err);
@@ -630,14 +650,17 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 		GTEST_SKIP() << why;
 	SlowQdisc qdisc;
 	ASSERT_NO_FATAL_FAILURE(qdisc.setUp());
-	EXPECT_EQ(readFile("/sys/class/net/vcan0/tx_queue_len"), std::to_string(SlowQdisc::kTxQueueLen) + "\n");
+	EXPECT_EQ(readFile("/sys/class/net/vcan0/tx_queue_len"),
+		  std::to_string(SlowQdisc::kTxQueueLen) + "\n");
 	/* tc as witness (iproute2's shows the pfifo's limit; busybox's only the kinds). */
 	const std::string shown = run("tc qdisc show dev vcan0").output;
 	EXPECT_NE(shown.find("tbf 1: root"), std::string::npos) << shown;
 	EXPECT_NE(shown.find("pfifo 10: parent 1:1"), std::string::npos) << shown;
 	if (run("tc -V").output.find("iproute2") != std::string::npos) {
-		EXPECT_NE(shown.find("limit " + std::to_string(SlowQdisc::kTxQueueLen) + "p"), std::string::npos)
-			<< "the pfifo should be txqueuelen long:\n" << shown;
+		EXPECT_NE(shown.find("limit " + std::to_string(SlowQdisc::kTxQueueLen) + "p"),
+			  std::string::npos)
+			<< "the pfifo should be txqueuelen long:\n"
+			<< shown;
 	}
 
 	SocketCanBus witness("vcan0");
@@ -650,7 +673,7 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 	ASSERT_TRUE(bus.open({}, options).isOk()) << bus.lastError();
 
 	std::int64_t longest_send_ns = 0;
-	int slow_sends = 0;	/* those that took a qdisc period or longer */
+	int slow_sends = 0; /* those that took a qdisc period or longer */
 	int refused_sends = 0;
 	int taken_before_enobufs = -1;
 	const std::int64_t start_ns = monotonicNs();
@@ -667,11 +690,13 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 	}
 	const std::int64_t sending_ms = (monotonicNs() - start_ns) / 1000000;
 	const CanStats after_sending = bus.stats();
-	std::printf("[          ] %d sends in %lld ms, longest %.2f ms; kernel took %d frames before the first "
-		    "ENOBUFS; %llu ENOBUFS, %llu dropped, %u queued\n",
-		    kFrames, static_cast<long long>(sending_ms), static_cast<double>(longest_send_ns) * 1e-6,
-		    taken_before_enobufs, static_cast<unsigned long long>(after_sending.tx_enobufs),
-		    static_cast<unsigned long long>(after_sending.tx_dropped), after_sending.tx_queued);
+	std::printf(
+		"[          ] %d sends in %lld ms, longest %.2f ms; kernel took %d frames before the first "
+		"ENOBUFS; %llu ENOBUFS, %llu dropped, %u queued\n",
+		kFrames, static_cast<long long>(sending_ms),
+		static_cast<double>(longest_send_ns) * 1e-6, taken_before_enobufs,
+		static_cast<unsigned long long>(after_sending.tx_enobufs),
+		static_cast<unsigned long long>(after_sending.tx_dropped), after_sending.tx_queued);
 
 	/* send() never waits for room in the qdisc, which frees one frame per 128 ms. Measured
 	 * against what waiting would cost in this run rather than against a fixed time (a loaded
@@ -684,11 +709,12 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 	ASSERT_GT(refused_sends, 0);
 	EXPECT_LT(sending_ms, refused_sends * SlowQdisc::kFramePeriodMs / 2)
 		<< refused_sends << " sends refused";
-	EXPECT_LT(slow_sends, (refused_sends + 1) / 2) << "sends that took a qdisc period or longer";
+	EXPECT_LT(slow_sends, (refused_sends + 1) / 2)
+		<< "sends that took a qdisc period or longer";
 	/* The kernel took the burst and a txqueuelen of frames (plus what drained meanwhile). */
 	EXPECT_GE(taken_before_enobufs, SlowQdisc::kTxQueueLen);
-	EXPECT_LE(taken_before_enobufs,
-		  SlowQdisc::kTxQueueLen + SlowQdisc::kBurstFrames + 1 + sending_ms / SlowQdisc::kFramePeriodMs);
+	EXPECT_LE(taken_before_enobufs, SlowQdisc::kTxQueueLen + SlowQdisc::kBurstFrames + 1 +
+						sending_ms / SlowQdisc::kFramePeriodMs);
 	/* The queue is full of the newest frames; the oldest were dropped and counted. */
 	EXPECT_EQ(after_sending.tx_queued, static_cast<std::uint32_t>(kDepth));
 	EXPECT_GT(after_sending.tx_dropped, 0u);
@@ -699,19 +725,23 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 	EXPECT_EQ(after_sending.state, CanState::ErrorActive);
 
 	/* As the qdisc drains, poll() gets the queue out. */
-	const int drain_ms = (kDepth + SlowQdisc::kTxQueueLen + 4) * SlowQdisc::kFramePeriodMs + 5000;
+	const int drain_ms =
+		(kDepth + SlowQdisc::kTxQueueLen + 4) * SlowQdisc::kFramePeriodMs + 5000;
 	std::vector<CanFrame> got;
-	const bool drained = waitUntil([&] {
-		bus.poll();
-		CanFrame f;
-		while (witness.receive(&f))
-			got.push_back(f);
-		return bus.stats().tx_queued == 0 && got.size() >= bus.stats().tx_frames;
-	}, drain_ms);
+	const bool drained = waitUntil(
+		[&] {
+			bus.poll();
+			CanFrame f;
+			while (witness.receive(&f))
+				got.push_back(f);
+			return bus.stats().tx_queued == 0 && got.size() >= bus.stats().tx_frames;
+		},
+		drain_ms);
 	const CanStats after_drain = bus.stats();
-	ASSERT_TRUE(drained) << after_drain.tx_queued << " frames still queued, " << got.size() << " of "
-			     << after_drain.tx_frames << " arrived";
-	EXPECT_GT(after_drain.tx_enobufs, after_sending.tx_enobufs) << "poll() met the full qdisc too";
+	ASSERT_TRUE(drained) << after_drain.tx_queued << " frames still queued, " << got.size()
+			     << " of " << after_drain.tx_frames << " arrived";
+	EXPECT_GT(after_drain.tx_enobufs, after_sending.tx_enobufs)
+		<< "poll() met the full qdisc too";
 	EXPECT_EQ(after_drain.tx_frames, after_sending.tx_frames + kDepth);
 	EXPECT_EQ(after_drain.tx_dropped, after_sending.tx_dropped);
 
@@ -745,14 +775,16 @@ TEST(VcanSocketCan, MissingInterfaceIsNamedWithTheOnesPresent)
 	SocketCanBus bus("vcan7");
 	const auto status = bus.open(kAcceptAll, CanOptions{});
 	ASSERT_FALSE(status.isOk());
-	EXPECT_EQ(status.message(), "can: no CAN interface \"vcan7\" (CAN interfaces present: vcan0, vcan1)");
+	EXPECT_EQ(status.message(),
+		  "can: no CAN interface \"vcan7\" (CAN interfaces present: vcan0, vcan1)");
 	EXPECT_EQ(bus.lastError(), status.message());
 	EXPECT_EQ(bus.stats().state, CanState::Closed);
 	EXPECT_EQ(bus.fd(), -1);
 	EXPECT_FALSE(bus.send(classicFrame(0x100, { 1 })));
 	EXPECT_EQ(bus.stats().tx_dropped, 1u);
 	bus.poll();
-	EXPECT_EQ(bus.stats().state, CanState::Closed) << "nothing is retried after a failed open()";
+	EXPECT_EQ(bus.stats().state, CanState::Closed)
+		<< "nothing is retried after a failed open()";
 
 	SocketCanBus lo("lo");
 	const auto not_can = lo.open({}, CanOptions{});
@@ -781,7 +813,8 @@ TEST(VcanSocketCan, InterfaceSetDownWhileOpenGoesDownAndComesBack)
 
 	mustRun("ip link set vcan1 down");
 	bus.poll();
-	EXPECT_EQ(bus.stats().state, CanState::Down) << canStateName(bus.stats().state) << ": " << bus.lastError();
+	EXPECT_EQ(bus.stats().state, CanState::Down)
+		<< canStateName(bus.stats().state) << ": " << bus.lastError();
 	EXPECT_NE(bus.lastError().find("lost vcan1"), std::string::npos) << bus.lastError();
 	EXPECT_EQ(bus.fd(), -1);
 	for (int i = 0; i < 3; ++i)
@@ -792,10 +825,13 @@ TEST(VcanSocketCan, InterfaceSetDownWhileOpenGoesDownAndComesBack)
 	SocketCanBus witness("vcan1");
 	openWitness(witness);
 	/* (30 s: a hang guard only; the wait ends as soon as it reopens.) */
-	EXPECT_TRUE(waitUntil([&] {
-		bus.poll();
-		return bus.stats().state == CanState::ErrorActive;
-	}, 30000)) << canStateName(bus.stats().state) << ": " << bus.lastError();
+	EXPECT_TRUE(waitUntil(
+		[&] {
+			bus.poll();
+			return bus.stats().state == CanState::ErrorActive;
+		},
+		30000))
+		<< canStateName(bus.stats().state) << ": " << bus.lastError();
 	EXPECT_EQ(bus.stats().restarts, 1u);
 	const std::vector<CanFrame> got = receiveFrames(witness, 3, 5000);
 	ASSERT_EQ(got.size(), 3u) << "the frames queued while it was down";
@@ -815,7 +851,8 @@ TEST(VcanSocketCan, InterfaceDeletedWhileOpenReopensWhenAddedAgain)
 	mustRun("ip link del vcan1");
 	bus.poll();
 	const CanStats lost = bus.stats();
-	EXPECT_EQ(lost.state, CanState::Down) << canStateName(lost.state) << ": " << bus.lastError();
+	EXPECT_EQ(lost.state, CanState::Down)
+		<< canStateName(lost.state) << ": " << bus.lastError();
 	EXPECT_NE(bus.lastError().find("lost vcan1"), std::string::npos) << bus.lastError();
 
 	/* While it is gone: frames queue (the oldest dropped past the depth), poll() retries. */
@@ -842,29 +879,33 @@ TEST(VcanSocketCan, InterfaceDeletedWhileOpenReopensWhenAddedAgain)
 	std::int64_t last_poll_end_ns = added_ns;
 	std::int64_t longest_gap_ns = 0;
 	std::int64_t longest_poll_ns = 0;
-	ASSERT_TRUE(waitUntil([&] {
-		const std::int64_t t0 = monotonicNs();
-		longest_gap_ns = std::max(longest_gap_ns, t0 - last_poll_end_ns);
-		bus.poll();
-		last_poll_end_ns = monotonicNs();
-		longest_poll_ns = std::max(longest_poll_ns, last_poll_end_ns - t0);
-		return bus.stats().state == CanState::ErrorActive;
-	}, 30000)) << canStateName(bus.stats().state) << ": " << bus.lastError();
+	ASSERT_TRUE(waitUntil(
+		[&] {
+			const std::int64_t t0 = monotonicNs();
+			longest_gap_ns = std::max(longest_gap_ns, t0 - last_poll_end_ns);
+			bus.poll();
+			last_poll_end_ns = monotonicNs();
+			longest_poll_ns = std::max(longest_poll_ns, last_poll_end_ns - t0);
+			return bus.stats().state == CanState::ErrorActive;
+		},
+		30000))
+		<< canStateName(bus.stats().state) << ": " << bus.lastError();
 	/* Retried every 500 ms: the last failed attempt was before the interface came back (no
 	 * poll() in between), so the one that succeeds is at most one interval after that, found
 	 * by the first poll() after it (the longest gap between them, measured) and taking at
 	 * most the longest poll(). */
 	EXPECT_LE(last_poll_end_ns - added_ns,
 		  SocketCanBus::kReopenInterval_ms * 1000000LL + longest_gap_ns + longest_poll_ns)
-		<< "polls up to " << longest_gap_ns / 1000000 << " ms apart, each up to " << longest_poll_ns / 1000000
-		<< " ms";
+		<< "polls up to " << longest_gap_ns / 1000000 << " ms apart, each up to "
+		<< longest_poll_ns / 1000000 << " ms";
 	EXPECT_EQ(bus.stats().restarts, 1u);
 	EXPECT_GE(bus.fd(), 0);
 
 	const std::vector<CanFrame> got = receiveFrames(witness, 4, 5000);
 	ASSERT_EQ(got.size(), 4u);
 	for (int i = 0; i < 4; ++i)
-		EXPECT_EQ(seqOf(got[static_cast<std::size_t>(i)]), i + 2) << "the newest four of six";
+		EXPECT_EQ(seqOf(got[static_cast<std::size_t>(i)]), i + 2)
+			<< "the newest four of six";
 
 	/* The reopened socket has the same kernel filters. */
 	mustRun("cansend vcan1 250#01");
@@ -886,13 +927,16 @@ int main(int argc, char **argv)
 {
 	::testing::InitGoogleTest(&argc, argv);
 	if (!std::getenv("DOCKPOSE_VM_ARCH")) {
-		std::fprintf(stderr, "test_vm_socketcan: not inside a dockpose test VM; run it there: "
-				     "scripts/vm run -- %s (or ctest -L vm)\n", argv[0]);
+		std::fprintf(stderr,
+			     "test_vm_socketcan: not inside a dockpose test VM; run it there: "
+			     "scripts/vm run -- %s (or ctest -L vm)\n",
+			     argv[0]);
 		return 77;
 	}
 	if (!interfaceExists("vcan0") || !interfaceExists("vcan1")) {
-		std::fprintf(stderr, "test_vm_socketcan: the VM has no vcan0/vcan1 (tests/vm/guest-init.sh "
-				     "creates them)\n");
+		std::fprintf(stderr,
+			     "test_vm_socketcan: the VM has no vcan0/vcan1 (tests/vm/guest-init.sh "
+			     "creates them)\n");
 		return 1;
 	}
 	::testing::UnitTest::GetInstance()->listeners().Append(new RestoreInterfaces);

@@ -25,8 +25,8 @@
 namespace dockpose::vmtest {
 
 struct CommandResult {
-	int status = -1;	/* exit status; -1 when it did not exit normally */
-	std::string output;	/* stdout and stderr */
+	int status = -1; /* exit status; -1 when it did not exit normally */
+	std::string output; /* stdout and stderr */
 };
 
 /* A shell word: COMMAND in single quotes. */
@@ -46,7 +46,8 @@ inline std::string shellQuote(const std::string &text)
  */
 inline CommandResult run(const std::string &command, int timeout_s = 120)
 {
-	const std::string watched = "( " + command + " ) & p=$!; n=0; t=" + std::to_string(timeout_s) +
+	const std::string watched =
+		"( " + command + " ) & p=$!; n=0; t=" + std::to_string(timeout_s) +
 		"\nwhile kill -0 $p 2>/dev/null; do\n"
 		"  if [ $n -ge $((t * 10)) ]; then\n"
 		"    echo \"vm_shell: still running after $t s, killed; its threads:\"\n"
@@ -85,7 +86,8 @@ inline void mustRun(const std::string &command)
 /* Poll done() every 5 ms until it holds or timeout_ms passes; its last answer. */
 inline bool waitUntil(const std::function<bool()> &done, int timeout_ms)
 {
-	const std::int64_t end_ns = hal::monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
+	const std::int64_t end_ns =
+		hal::monotonicNs() + static_cast<std::int64_t>(timeout_ms) * 1000000;
 	while (!done()) {
 		if (hal::monotonicNs() > end_ns)
 			return done();

@@ -307,8 +307,9 @@ int main(int argc, char **argv)
 	std::string drawn_text;
 	for (const auto &[leds, c] : by_drawn) {
 		char item[80];
-		std::snprintf(item, sizeof(item), "%s%d LEDs %d/%d (%.1f%%)", drawn_text.empty() ? "" : ", ", leds,
-			      c[1], c[0], percent(c[1], c[0]));
+		std::snprintf(item, sizeof(item), "%s%d LEDs %d/%d (%.1f%%)",
+			      drawn_text.empty() ? "" : ", ", leds, c[1], c[0],
+			      percent(c[1], c[0]));
 		drawn_text += item;
 	}
 	std::printf("face-complete frames correct, by LEDs drawn: %s\n", drawn_text.c_str());
