@@ -300,8 +300,13 @@ TEST(SyntheticCamera, FramesAreTheRendererFramesOfTruthAt)
 		const Diff d = compare(f.image.view(), expected.view());
 		EXPECT_EQ(d.differing, 0) << "frame " << f.sequence << ": max diff " << d.max_abs;
 		with_leds += truth.visible_mask != 0;
-		/* ... and not the frame of another pose. */
-		renderer.render(camera.truthAt(f.sequence + 3), sceneOptions(scene, 1.0),
+		/*
+		 * ... and not the frame of another pose: 30 mm aside (not truthAt of a
+		 * later sequence, which on a loaded machine may already hold at `to`).
+		 */
+		Pose aside = camera.truthAt(f.sequence);
+		aside.t_mm.x() += 30.0;
+		renderer.render(aside, sceneOptions(scene, 1.0),
 				SyntheticCamera::frameSeed(scene.seed, f.sequence), &expected);
 		EXPECT_GT(compare(f.image.view(), expected.view()).differing, 0);
 	}

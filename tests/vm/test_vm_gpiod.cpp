@@ -135,6 +135,7 @@ extern "C" void gpiod_line_release(gpiod_line *line)
 #include <chrono>
 #include <fstream>
 #include <functional>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -742,19 +743,38 @@ TEST_F(GpioSimStrobe, DockposedLightsTheLineAndSwitchesItOffOnSigterm)
 	const std::string probe_out = std::string(dir) + "/probe.txt";
 
 	ASSERT_NO_FATAL_FAILURE(setPull("pull-down"));
-	Child daemon({ DOCKPOSED, "--board", board },
-		     { std::string("LD_PRELOAD=") + DOCKPOSE_VM_RELEASE_PROBE_LIB,
-		       "DOCKPOSE_VM_PROBE_VALUE=" + valuePath(),
-		       "DOCKPOSE_VM_PROBE_OUT=" + probe_out });
-	ASSERT_TRUE(daemon.started()) << DOCKPOSED;
-	/* The strobe in constant mode: lit once dockposed runs (camera started and all). Starting
+	/*
+	 * The strobe in constant mode: lit once dockposed runs (camera started and all). Starting
 	 * takes what the guest gives it (seconds under TCG, more on a loaded host): wait while it
-	 * runs; the guard only ends a hang. */
+	 * runs; the guard only ends a hang. A start-up that blocks (libcamera's start has
+	 * deadlocked now and then in the arm64 guest, and once took over the default 20 s) ends
+	 * with status 75 after --startup-timeout; systemd restarts it (Restart=on-failure), and
+	 * so does this test, once, as tests/vm/firmware_guest.sh does.
+	 */
+	const int startup_timeout_s = 45;
+	std::unique_ptr<Child> daemon;
 	int early_status = -1;
-	const bool lit =
-		waitUntil([&] { return level() == 1 || (early_status = daemon.wait(0)) != -1; },
-			  kDaemonGuardMs) &&
-		level() == 1;
+	bool lit = false;
+	for (int attempt = 0; attempt < 2 && !lit; ++attempt) {
+		if (attempt > 0 && early_status != -1 &&
+		    !(WIFEXITED(early_status) && WEXITSTATUS(early_status) == 75))
+			break;
+		early_status = -1;
+		daemon = std::make_unique<Child>(
+			std::vector<std::string>{ DOCKPOSED, "--board", board, "--startup-timeout",
+						  std::to_string(startup_timeout_s) },
+			std::vector<std::string>{ std::string("LD_PRELOAD=") +
+							  DOCKPOSE_VM_RELEASE_PROBE_LIB,
+						  "DOCKPOSE_VM_PROBE_VALUE=" + valuePath(),
+						  "DOCKPOSE_VM_PROBE_OUT=" + probe_out });
+		ASSERT_TRUE(daemon->started()) << DOCKPOSED;
+		lit = waitUntil(
+			      [&] {
+				      return level() == 1 || (early_status = daemon->wait(0)) != -1;
+			      },
+			      kDaemonGuardMs) &&
+		      level() == 1;
+	}
 	ASSERT_TRUE(lit)
 		<< "dockposed never lit the line"
 		<< (early_status != -1
@@ -764,10 +784,10 @@ TEST_F(GpioSimStrobe, DockposedLightsTheLineAndSwitchesItOffOnSigterm)
 	EXPECT_TRUE(contains(gpioinfoLine(), "\"dockpose\"")) << gpioinfoLine();
 
 	ASSERT_NO_FATAL_FAILURE(setPull("pull-up"));
-	daemon.signal(SIGTERM);
+	daemon->signal(SIGTERM);
 	/* It stops at the end of the loop iteration under way (a slow one: seconds); the guard only
 	 * ends a hang. */
-	const int status = daemon.wait(kDaemonGuardMs);
+	const int status = daemon->wait(kDaemonGuardMs);
 	ASSERT_NE(status, -1)
 		<< "dockposed did not stop within " << kDaemonGuardMs / 1000 << " s of SIGTERM";
 	EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "wait status " << status;
