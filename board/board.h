@@ -12,8 +12,9 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
-#include "firmware/config.h"
+#include "board/board_config.h"
 #include "hal/camera.h"
 #include "hal/can_bus.h"
 #include "hal/status.h"
@@ -33,7 +34,7 @@ struct BoardInfo {
 	const char *name;
 	const char *description;
 	/* Build the board's backends from a validated configuration (not yet opened). */
-	hal::Status (*wire)(const firmware::BoardConfig &config, Backends *out);
+	hal::Status (*wire)(const BoardConfig &config, Backends *out);
 	/* Backends the board accepts in its file, per section (checked by validation). */
 	std::span<const char *const> cameras;
 	std::span<const char *const> strobes;
@@ -43,5 +44,18 @@ struct BoardInfo {
 /* The boards built into this binary. */
 std::span<const BoardInfo> boards();
 const BoardInfo *findBoard(const std::string &name);
+
+/*
+ * Every backend name a built board accepts in one section, in the boards'
+ * order, each once: what a board file may name at all (firmware/config.cpp
+ * validates with it); the named board's own list then decides (dockposed).
+ * The boards' lists are the one place backend names are written.
+ */
+enum class BackendKind {
+	Camera,
+	Strobe,
+	Can
+};
+std::vector<const char *> backendNames(BackendKind kind);
 
 } /* namespace dockpose::board */

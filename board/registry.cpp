@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* The boards built into this binary (DOCKPOSE_BOARDS in board/CMakeLists.txt). */
 #include <array>
+#include <cstring>
 
 #include "board/board.h"
 
@@ -53,6 +54,24 @@ const BoardInfo *findBoard(const std::string &name)
 		if (name == b.name)
 			return &b;
 	return nullptr;
+}
+
+std::vector<const char *> backendNames(BackendKind kind)
+{
+	std::vector<const char *> names;
+	for (const BoardInfo &b : boards()) {
+		const std::span<const char *const> list = kind == BackendKind::Camera	? b.cameras
+							  : kind == BackendKind::Strobe ? b.strobes
+											: b.cans;
+		for (const char *name : list) {
+			bool seen = false;
+			for (const char *n : names)
+				seen = seen || std::strcmp(n, name) == 0;
+			if (!seen)
+				names.push_back(name);
+		}
+	}
+	return names;
 }
 
 } /* namespace dockpose::board */

@@ -22,34 +22,20 @@
 #include <set>
 #include <span>
 #include <system_error>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "algo/io/model_json.h"
+#include "board/board.h"
 
 namespace dockpose::firmware {
-
-const char *strobeModeName(StrobeMode mode)
-{
-	switch (mode) {
-	case StrobeMode::Off:
-		return "off";
-	case StrobeMode::Constant:
-		return "constant";
-	case StrobeMode::Alternate:
-		return "alternate";
-	}
-	return "unknown";
-}
 
 namespace {
 
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-constexpr const char *kCameraBackends[] = { "libcamera", "synthetic", "replay" };
-constexpr const char *kStrobeBackends[] = { "gpiod", "recording" };
-constexpr const char *kCanBackends[] = { "socketcan", "file", "loopback" };
 constexpr const char *kStrobeModes[] = { "off", "constant", "alternate" };
 constexpr const char *kTrackModes[] = { "track", "search_only" };
 /* CiA 301 / common CAN bit rates. */
@@ -510,7 +496,7 @@ std::string interfaceNameProblem(const std::string &name)
 	return {};
 }
 
-void readSynthetic(Section &syn, SyntheticCameraConfig *out)
+void readSynthetic(Section &syn, hal::SyntheticScene *out)
 {
 	getPose(syn, "from", out->from);
 	getPose(syn, "to", out->to);
@@ -556,14 +542,15 @@ void checkReplayFolder(Checker &c, const std::string &path, const std::string &w
 	c.fail(path, shown + " holds no frame_*.pgm files");
 }
 
-void readCamera(Section &cam, CameraSection *out)
+void readCamera(Section &cam, CameraSection *out, CameraIntrinsics *model)
 {
 	Checker &c = cam.checker();
 	std::size_t index = 0;
-	const Got backend = getChoice(cam, "backend", kCameraBackends, &index, &out->backend);
+	const std::vector<const char *> backends = board::backendNames(board::BackendKind::Camera);
+	const Got backend = getChoice(cam, "backend", backends, &index, &out->backend);
 	if (backend == Got::Absent)
 		cam.missing("backend",
-			    "required key is missing (one of " + joinNames(kCameraBackends) + ")");
+			    "required key is missing (one of " + joinNames(backends) + ")");
 	getString(cam, "id", &out->id);
 	getInt(cam, "index", 0, 255, &out->index);
 	const Got width = getInt(cam, "width", 0, 16384, &out->width);
@@ -610,6 +597,8 @@ void readCamera(Section &cam, CameraSection *out)
 
 	if (intrinsics == Got::Ok) {
 		const LoadResult<CameraIntrinsics> k = loadCameraIntrinsics(out->intrinsics);
+		if (k.ok())
+			*model = k.value;
 		if (!k.ok()) {
 			c.fail(cam.at("intrinsics"), "cannot read camera intrinsics " +
 							     quote(intrinsics_written) + ": " +
@@ -645,10 +634,11 @@ void readStrobe(Section &st, StrobeSection *out)
 {
 	Checker &c = st.checker();
 	std::size_t index = 0;
-	const Got backend = getChoice(st, "backend", kStrobeBackends, &index, &out->backend);
+	const std::vector<const char *> backends = board::backendNames(board::BackendKind::Strobe);
+	const Got backend = getChoice(st, "backend", backends, &index, &out->backend);
 	if (backend == Got::Absent)
 		st.missing("backend",
-			   "required key is missing (one of " + joinNames(kStrobeBackends) + ")");
+			   "required key is missing (one of " + joinNames(backends) + ")");
 	const Got chip = getString(st, "chip", &out->chip);
 	const Got line = getInt(st, "line", 0, 1023, &out->line);
 	getBool(st, "active_low", &out->active_low);
@@ -721,10 +711,11 @@ void readCan(Section &can, CanSection *out)
 {
 	Checker &c = can.checker();
 	std::size_t index = 0;
-	const Got backend = getChoice(can, "backend", kCanBackends, &index, &out->backend);
+	const std::vector<const char *> backends = board::backendNames(board::BackendKind::Can);
+	const Got backend = getChoice(can, "backend", backends, &index, &out->backend);
 	if (backend == Got::Absent)
 		can.missing("backend",
-			    "required key is missing (one of " + joinNames(kCanBackends) + ")");
+			    "required key is missing (one of " + joinNames(backends) + ")");
 	const Got iface = getString(can, "interface", &out->interface);
 	if (iface == Got::Ok &&
 	    !(out->interface.empty() && backend == Got::Ok && out->backend != "socketcan")) {
@@ -762,7 +753,7 @@ void readCan(Section &can, CanSection *out)
 		       "required when can.backend is \"socketcan\" (an interface such as \"can0\")");
 }
 
-void readPipeline(Section &pl, PipelineSection *out)
+void readPipeline(Section &pl, PipelineSection *out, TargetModel *target_model)
 {
 	Checker &c = pl.checker();
 	std::string target_written;
@@ -784,6 +775,8 @@ void readPipeline(Section &pl, PipelineSection *out)
 	bool search_ok = search != Got::Bad;
 	if (target == Got::Ok) {
 		const LoadResult<TargetModel> model = loadTargetModel(out->target);
+		if (model.ok())
+			*target_model = model.value;
 		if (!model.ok()) {
 			c.fail(pl.at("target"), "cannot read target model " +
 							quote(target_written) + ": " + model.error);
@@ -916,13 +909,13 @@ ConfigResult parseWithSource(const std::string &json_text, const std::string &ba
 		checker.fail("board", "must not be empty (the board's name, e.g. \"sim\")");
 
 	Section camera = subsection(top, "camera", true);
-	readCamera(camera, &cfg.camera);
+	readCamera(camera, &cfg.camera, &cfg.camera_model);
 	Section strobe = subsection(top, "strobe", true);
 	readStrobe(strobe, &cfg.strobe);
 	Section can = subsection(top, "can", true);
 	readCan(can, &cfg.can);
 	Section pipeline = subsection(top, "pipeline", true);
-	readPipeline(pipeline, &cfg.pipeline);
+	readPipeline(pipeline, &cfg.pipeline, &cfg.target_model);
 	Section systemd = subsection(top, "systemd", false);
 	getBool(systemd, "notify", &cfg.systemd.notify);
 	systemd.finish();

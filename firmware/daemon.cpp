@@ -7,7 +7,6 @@
 #include <string>
 
 #include "algo/ambient.h"
-#include "algo/io/model_json.h"
 #include "hal/clock.h"
 
 namespace dockpose::firmware {
@@ -88,15 +87,15 @@ Daemon::Daemon(const BoardConfig &config, board::Backends backends, std::FILE *l
 	  period_ns_(static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz)),
 	  measured_period_ns_(period_ns_)
 {
-	/* The configuration was validated (both files load); a failure here is a bug upstream,
-	 * reported by start(). */
-	auto target = loadTargetModel(config_.pipeline.target);
-	auto intrinsics = loadCameraIntrinsics(config_.camera.intrinsics);
-	if (target.ok() && intrinsics.ok()) {
-		pipeline_ = std::make_unique<Pipeline>(target.value, intrinsics.value,
+	/* The configuration was validated: both models loaded (an empty one is a bug upstream,
+	 * reported by start()). */
+	const TargetModel &target = config_.target_model;
+	const CameraIntrinsics &intrinsics = config_.camera_model;
+	if (!target.points_mm.empty() && intrinsics.width > 0 && intrinsics.height > 0) {
+		pipeline_ = std::make_unique<Pipeline>(target, intrinsics,
 						       pipelineConfig(config_.pipeline));
-		ambient_ = Image(intrinsics.value.width, intrinsics.value.height);
-		difference_ = Image(intrinsics.value.width, intrinsics.value.height);
+		ambient_ = Image(intrinsics.width, intrinsics.height);
+		difference_ = Image(intrinsics.width, intrinsics.height);
 	}
 }
 
@@ -108,8 +107,9 @@ Daemon::~Daemon()
 hal::Status Daemon::start()
 {
 	if (!pipeline_)
-		return hal::Status::error("cannot load " + config_.pipeline.target + " or " +
-					  config_.camera.intrinsics);
+		return hal::Status::error("the configuration holds no loaded target model (" +
+					  config_.pipeline.target + ") or camera model (" +
+					  config_.camera.intrinsics + "): it was not validated");
 	if (!backends_.strobe || !backends_.strobe_control || !backends_.camera || !backends_.can)
 		return hal::Status::error("board " + config_.board + ": wiring left a backend out");
 

@@ -20,7 +20,7 @@ constexpr const char *kCameras[] = { "libcamera" };
 constexpr const char *kStrobes[] = { "gpiod" };
 constexpr const char *kCans[] = { "socketcan" };
 
-hal::Status wire(const firmware::BoardConfig &config, Backends *out)
+hal::Status wire(const BoardConfig &config, Backends *out)
 {
 	auto strobe = std::make_unique<hal::GpiodStrobe>(config.strobe.chip, config.strobe.line,
 							 config.strobe.active_low);

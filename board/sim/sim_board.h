@@ -5,7 +5,7 @@
 #include <memory>
 
 #include "board/board.h"
-#include "firmware/config.h"
+#include "board/board_config.h"
 #include "hal/can_bus.h"
 
 namespace dockpose::board {
@@ -15,7 +15,7 @@ namespace dockpose::board {
  * candump-log bus; tests use the loopback bus): a RecordingStrobe with its controller, and the
  * synthetic or replay camera of camera.backend. Allocates: the backends.
  */
-hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<hal::CanBus> can,
+hal::Status wireSimulated(const BoardConfig &config, std::unique_ptr<hal::CanBus> can,
 			  Backends *out);
 
 } /* namespace dockpose::board */

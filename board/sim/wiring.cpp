@@ -8,7 +8,6 @@
  */
 #include <memory>
 
-#include "algo/io/model_json.h"
 #include "board/board.h"
 #include "board/sim/sim_board.h"
 #include "hal/sim/file_can_bus.h"
@@ -24,25 +23,7 @@ constexpr const char *kCameras[] = { "synthetic", "replay" };
 constexpr const char *kStrobes[] = { "recording" };
 constexpr const char *kCans[] = { "file" };
 
-/* The synthetic camera's scene from the board file's camera.synthetic section. */
-hal::SyntheticScene syntheticScene(const firmware::SyntheticCameraConfig &s)
-{
-	hal::SyntheticScene scene{};
-	for (int i = 0; i < 6; ++i) {
-		scene.from[i] = s.from[i];
-		scene.to[i] = s.to[i];
-	}
-	scene.duration_s = s.duration_s;
-	scene.loop = s.loop;
-	scene.reflections = s.reflections;
-	scene.glints = s.glints;
-	scene.hot_pixels = s.hot_pixels;
-	scene.noise_sigma = s.noise_sigma;
-	scene.seed = s.seed;
-	return scene;
-}
-
-hal::Status wire(const firmware::BoardConfig &config, Backends *out)
+hal::Status wire(const BoardConfig &config, Backends *out)
 {
 	if (config.can.log_file.empty())
 		return hal::Status::error(
@@ -53,7 +34,7 @@ hal::Status wire(const firmware::BoardConfig &config, Backends *out)
 
 } /* namespace */
 
-hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<hal::CanBus> can,
+hal::Status wireSimulated(const BoardConfig &config, std::unique_ptr<hal::CanBus> can,
 			  Backends *out)
 {
 	auto strobe = std::make_unique<hal::RecordingStrobe>();
@@ -62,15 +43,10 @@ hal::Status wireSimulated(const firmware::BoardConfig &config, std::unique_ptr<h
 	out->strobe = std::move(strobe);
 
 	if (config.camera.backend == "synthetic") {
-		auto target = loadTargetModel(config.pipeline.target);
-		if (!target.ok())
-			return hal::Status::error(target.error);
-		auto intrinsics = loadCameraIntrinsics(config.camera.intrinsics);
-		if (!intrinsics.ok())
-			return hal::Status::error(intrinsics.error);
-		const hal::SyntheticScene scene = syntheticScene(config.camera.synthetic);
-		out->camera = std::make_unique<hal::SyntheticCamera>(
-			target.value, intrinsics.value, scene, out->strobe_control.get());
+		out->camera = std::make_unique<hal::SyntheticCamera>(config.target_model,
+								     config.camera_model,
+								     config.camera.synthetic,
+								     out->strobe_control.get());
 	} else {
 		out->camera = std::make_unique<hal::ReplayCamera>(config.camera.replay.folder,
 								  config.camera.replay.loop);

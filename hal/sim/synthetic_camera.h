@@ -38,22 +38,10 @@
 #include "algo/synth/renderer.h"
 #include "algo/target_model.h"
 #include "hal/sim/sim_camera_base.h"
+#include "hal/sim/synthetic_scene.h"
 #include "hal/strobe.h"
 
 namespace dockpose::hal {
-
-struct SyntheticScene {
-	/* Target pose in the camera frame: x, y, z (mm), roll, pan, tilt (degrees). */
-	double from[6] = { 120.0, -60.0, 1500.0, 3.0, 10.0, -2.0 };
-	double to[6] = { 40.0, -10.0, 300.0, 0.5, 2.0, 0.0 };
-	double duration_s = 5.0; /* from -> to; 0: always at `to` */
-	bool loop = false; /* start again at `from` after duration_s */
-	int reflections = 2;
-	int glints = 1;
-	int hot_pixels = 20;
-	double noise_sigma = 2.0; /* read noise, grey levels */
-	std::uint64_t seed = 1;
-};
 
 class SyntheticCamera : public SimCameraBase
 {

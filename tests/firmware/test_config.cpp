@@ -197,13 +197,13 @@ const BadFile kBadFiles[] = {
 	{ "missing_camera_keys",
 	  R"({ "camera": { "backend": null, "intrinsics": null } })",
 	  nullptr,
-	  { "camera.backend: required key is missing (one of libcamera, synthetic, replay)",
+	  { "camera.backend: required key is missing (one of synthetic, replay, libcamera)",
 	    "camera.intrinsics: required key is missing" } },
 	{ "missing_backends_and_target",
 	  R"({ "strobe": { "backend": null }, "can": { "backend": null }, "pipeline": { "target": null } })",
 	  nullptr,
-	  { "strobe.backend: required key is missing (one of gpiod, recording)",
-	    "can.backend: required key is missing (one of socketcan, file, loopback)",
+	  { "strobe.backend: required key is missing (one of recording, gpiod)",
+	    "can.backend: required key is missing (one of file, socketcan)",
 	    "pipeline.target: required key is missing" } },
 	{ "section_wrong_type",
 	  R"({ "strobe": "gpiod" })",
@@ -279,7 +279,7 @@ const BadFile kBadFiles[] = {
 	{ "bad_camera_backend",
 	  R"({ "camera": { "backend": "v4l2" } })",
 	  nullptr,
-	  { "camera.backend: \"v4l2\" is not one of libcamera, synthetic, replay" } },
+	  { "camera.backend: \"v4l2\" is not one of synthetic, replay, libcamera" } },
 	{ "bad_pipeline_mode",
 	  R"({ "pipeline": { "mode": "tracking" } })",
 	  nullptr,
@@ -287,7 +287,7 @@ const BadFile kBadFiles[] = {
 	{ "bad_can_backend",
 	  R"({ "can": { "backend": "vcan" } })",
 	  nullptr,
-	  { "can.backend: \"vcan\" is not one of socketcan, file, loopback" } },
+	  { "can.backend: \"vcan\" is not one of file, socketcan" } },
 	{ "bad_hex_base_id",
 	  R"({ "can": { "base_id": "0x3g0" } })",
 	  nullptr,
@@ -536,7 +536,7 @@ TEST_F(ConfigTest, DefaultsFillIn)
 {
 	const char *minimal = R"({ "board": "sim",
 		"camera": { "backend": "synthetic", "intrinsics": "camera.json" },
-		"strobe": { "backend": "recording" }, "can": { "backend": "loopback" },
+		"strobe": { "backend": "recording" }, "can": { "backend": "file" },
 		"pipeline": { "target": "target.json" } })";
 	const ConfigResult r = loadText(minimal);
 	ASSERT_TRUE(r.ok()) << joinErrors(r.errors);
