@@ -154,7 +154,6 @@ public:
 	template<typename Sink>
 	bool label(const ImageView &image, const ThresholdMap &map, Sink &&sink);
 
-	const BlobFilterConfig &filterConfig() const { return filter_; }
 	Thresholder &thresholder() { return thresholder_; }
 
 	/*

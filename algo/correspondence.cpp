@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include <Eigen/Geometry>
 
@@ -84,9 +85,9 @@ double log10Choose(int n, int k)
 
 } /* namespace */
 
-Correspondence::Correspondence(const TargetModel &target, const CameraModel &camera,
+Correspondence::Correspondence(TargetModel target, const CameraModel &camera,
 			       const CorrespondenceConfig &config)
-	: target_(target),
+	: target_(std::move(target)),
 	  camera_(camera),
 	  config_(config)
 {
@@ -156,8 +157,7 @@ void Correspondence::findSymmetries()
 	const double tol = 1e-3 * std::max(diameter_mm_, 1e-9);
 	const std::size_t nl = target_.points_mm.size();
 	const auto &face0 = target_.faces[0];
-	for (std::size_t g = 0; g < target_.faces.size(); ++g) {
-		const auto &face = target_.faces[g];
+	for (const auto &face : target_.faces) {
 		for (int dir = -1; dir <= 1; dir += 2)
 			for (int rot = 0; rot < 4; ++rot) {
 				Eigen::Vector3d src[4], dst[4];
@@ -193,10 +193,10 @@ void Correspondence::findSymmetries()
 					for (int k = 0; k < 4; ++k)
 						image |= 1u << s.perm[target_.faces[f][k]];
 					bool found = false;
-					for (std::size_t h = 0; h < target_.faces.size(); ++h) {
+					for (const auto &other : target_.faces) {
 						std::uint32_t m = 0;
 						for (int k = 0; k < 4; ++k)
-							m |= 1u << target_.faces[h][k];
+							m |= 1u << other[k];
 						found = found || m == image;
 					}
 					ok = found;
@@ -395,8 +395,8 @@ bool Correspondence::refineMatched(const Pose &initial, Hypothesis *h, bool cova
 	RefineOptions options = config_.refine;
 	options.covariance = covariance;
 	options.led_sigma_mm = target_.led_sigma_mm;
-	const Pose start =
-		initial; /* initial may alias h->refined.pose, which refinePose() resets */
+	/* A copy: initial may alias h->refined.pose, which refinePose() resets. */
+	const Pose start = initial; // NOLINT(performance-unnecessary-copy-initialization)
 	return refinePose(camera_, model.data(), pixels.data(), n, start, options, &h->refined,
 			  cov.data());
 }
@@ -525,7 +525,7 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 		Eigen::Vector2d uv;
 		if (!camera_.project(h.refined.pose.apply(target_.points_mm[pair[0]]), &uv))
 			return 0.0;
-		const int j = pair[1];
+		const int j = static_cast<std::uint8_t>(pair[1]); /* a candidate index, 0..63 */
 		tol2[i] = std::max((uv - px_[j]).squaredNorm() * inflate2, 4.0 * var_[j]);
 		lo = lo.cwiseMin(px_[j]);
 		hi = hi.cwiseMax(px_[j]);
@@ -1257,18 +1257,18 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	result->budget_exhausted = budget_hit_;
 	if (kept_.empty())
 		return false;
-	auto bestKept = [this] {
+	auto best_kept = [this] {
 		std::size_t best = 0;
 		for (std::size_t i = 1; i < kept_.size(); ++i)
 			if (better(kept_[i], kept_[best]))
 				best = i;
 		return best;
 	};
-	std::size_t best = bestKept();
+	std::size_t best = best_kept();
 	if (acceptable(kept_[best])) {
 		const Hypothesis first = kept_[best];
 		addCompetitors(first);
-		best = bestKept();
+		best = best_kept();
 	}
 	Hypothesis chosen = kept_[best];
 	result->log10_nfa = chosen.log10_nfa;
@@ -1311,7 +1311,6 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 		return false;
 	result->refined = chosen.refined;
 	result->match = chosen.match;
-	result->expected_visible = chosen.expected;
 	return true;
 }
 
@@ -1385,7 +1384,6 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 			result->tracked = true;
 			result->refined = h.refined;
 			result->match = h.match;
-			result->expected_visible = h.expected;
 			result->log10_nfa = h.log10_nfa;
 			result->verified = 1;
 			return true;

@@ -121,7 +121,6 @@ struct CorrespondenceResult {
 	bool budget_exhausted = false; /* the search stopped at max_hypotheses */
 	RefineResult refined;
 	Match match;
-	int expected_visible = 0; /* LEDs the accepted pose predicts inside the frame */
 	double log10_nfa = 0.0; /* of the accepted pose (or of the best rejected one) */
 	int hypotheses = 0; /* closed-form hypotheses screened */
 	int verified = 0; /* hypotheses verified by projecting all LEDs */
@@ -148,7 +147,7 @@ struct SolveContext {
 class Correspondence
 {
 public:
-	Correspondence(const TargetModel &target, const CameraModel &camera,
+	Correspondence(TargetModel target, const CameraModel &camera,
 		       const CorrespondenceConfig &config);
 
 	/*
@@ -175,7 +174,7 @@ public:
 		std::array<std::int8_t, kMaxLeds> perm{}; /* model LED i maps onto LED perm[i] */
 		Pose transform; /* X' = R X + t maps the model onto itself */
 	};
-	const StaticVector<Symmetry, 2 * 4 * kMaxFaces> &symmetries() const { return symmetries_; }
+	const StaticVector<Symmetry, kMaxFaces * 8> &symmetries() const { return symmetries_; }
 
 private:
 	/* A verified hypothesis: refined pose, its matches, and what it predicts. */
@@ -244,7 +243,7 @@ private:
 	/* Front normals of the faces (TargetModel::frontNormals). */
 	StaticVector<Eigen::Vector3d, kMaxFaces> normals_;
 	StaticVector<Eigen::Vector3d, kMaxFaces> face_centres_;
-	StaticVector<Symmetry, 2 * 4 * kMaxFaces> symmetries_;
+	StaticVector<Symmetry, kMaxFaces * 8> symmetries_; /* 2 directions x 4 turns per face */
 
 	/*
 	 * Face vertices in 2-D coordinates of the face's own plane (for signed

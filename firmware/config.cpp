@@ -28,6 +28,7 @@
 
 #include "algo/io/model_json.h"
 #include "board/board.h"
+#include "firmware/protocol/dockpose_can.h"
 
 namespace dockpose::firmware {
 
@@ -41,9 +42,9 @@ constexpr const char *kTrackModes[] = { "track", "search_only" };
 /* CiA 301 / common CAN bit rates. */
 constexpr std::int64_t kCanBitrates[] = { 10000,  20000,  50000,  100000, 125000,
 					  250000, 500000, 800000, 1000000 };
-/* The protocol uses base_id + 0 .. base_id + kCanIdSpan (firmware/protocol). */
-constexpr std::uint32_t kCanIdSpan = 0x10;
+/* The protocol's identifiers: base_id + 0 .. base_id + kCanIdSpan, 11 bits (firmware/protocol). */
 constexpr std::uint32_t kCanMaxId = 0x7ff;
+constexpr std::uint32_t kCanIdSpan = kCanMaxId - can::kMaxBaseId;
 constexpr std::size_t kIfNameSize = 16; /* IFNAMSIZ, including the terminating NUL */
 
 /* A number for a message: integers without a fraction, others with 6 significant digits. */
@@ -258,8 +259,9 @@ public:
 				for (std::size_t i = 0; i < known_.size(); ++i)
 					hint += (i ? ", " : "") + known_[i];
 			}
-			checker_->failRaw("unknown key " + quote(key) + " " + where + " (" + hint +
-					  ")");
+			std::string message = "unknown key " + quote(key);
+			message += " " + where + " (" + hint + ")";
+			checker_->failRaw(message);
 		}
 	}
 
@@ -697,7 +699,7 @@ Got getCanId(Section &s, const char *key, std::uint32_t *out)
 					       hex(kCanIdSpan) + ")");
 		return Got::Bad;
 	}
-	if (id + kCanIdSpan > kCanMaxId) {
+	if (!can::validBaseId(static_cast<std::uint32_t>(id))) {
 		s.checker().fail(path, hex(id) + " leaves no room for offsets up to " +
 					       hex(kCanIdSpan) + " in 11 bits (max " +
 					       hex(kCanMaxId - kCanIdSpan) + ")");
@@ -750,7 +752,7 @@ void readCan(Section &can, CanSection *out)
 
 	if (backend == Got::Ok && out->backend == "socketcan" && iface == Got::Absent)
 		c.fail(can.at("interface"),
-		       "required when can.backend is \"socketcan\" (an interface such as \"can0\")");
+		       R"(required when can.backend is "socketcan" (an interface such as "can0"))");
 }
 
 void readPipeline(Section &pl, PipelineSection *out, TargetModel *target_model)

@@ -202,9 +202,6 @@ public:
 	/* Whether LED i faces the camera at this pose (before occlusion). */
 	bool ledVisible(const Pose &pose, int led, double max_view_angle_deg) const;
 
-	/* Front unit normal of face f (target frame), see the visibility rule above. */
-	const Eigen::Vector3d &faceNormal(int f) const { return normals_[f]; }
-
 private:
 	TargetModel target_;
 	CameraModel camera_;

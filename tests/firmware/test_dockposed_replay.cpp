@@ -99,7 +99,7 @@ std::string writeReplayBoard(const std::string &dir, const std::string &frames)
 	cam["intrinsics"] = kSource + "/board/sim/camera.json";
 	board["pipeline"]["target"] = kSource + "/board/sim/target.json";
 	board["strobe"]["mode"] = "off"; /* replayed frames show the LEDs whatever the line does */
-	const std::string path = dir + "/board-replay.json";
+	std::string path = dir + "/board-replay.json";
 	std::ofstream(path) << board.dump(1, '\t') << "\n";
 	return path;
 }

@@ -213,7 +213,7 @@ TEST(SyntheticCamera, TruthFollowsTheTrajectory)
 	SyntheticCamera camera(wedge(), cam512(), scene, nullptr);
 	ASSERT_TRUE(camera.configure(config(20000)).isOk()); /* 50 frames per second */
 
-	auto expectPose = [](const Pose &p, const double v[6]) {
+	auto expect_pose = [](const Pose &p, const double v[6]) {
 		EXPECT_NEAR(p.t_mm.x(), v[0], 1e-9);
 		EXPECT_NEAR(p.t_mm.y(), v[1], 1e-9);
 		EXPECT_NEAR(p.t_mm.z(), v[2], 1e-9);
@@ -222,22 +222,22 @@ TEST(SyntheticCamera, TruthFollowsTheTrajectory)
 		EXPECT_NEAR(rpy.y(), v[4], 1e-9);
 		EXPECT_NEAR(rpy.z(), v[5], 1e-9);
 	};
-	expectPose(camera.truthAt(0), scene.from);
-	expectPose(camera.truthAt(50), scene.to);
-	expectPose(camera.truthAt(500), scene.to); /* holds */
+	expect_pose(camera.truthAt(0), scene.from);
+	expect_pose(camera.truthAt(50), scene.to);
+	expect_pose(camera.truthAt(500), scene.to); /* holds */
 	double mid[6], quarter[6];
 	for (int i = 0; i < 6; ++i) {
 		mid[i] = 0.5 * (scene.from[i] + scene.to[i]);
 		quarter[i] = scene.from[i] + 0.26 * (scene.to[i] - scene.from[i]);
 	}
-	expectPose(camera.truthAt(25), mid);
-	expectPose(camera.truthAt(13), quarter);
+	expect_pose(camera.truthAt(25), mid);
+	expect_pose(camera.truthAt(13), quarter);
 
 	scene.loop = true;
 	SyntheticCamera looping(wedge(), cam512(), scene, nullptr);
 	ASSERT_TRUE(looping.configure(config(20000)).isOk());
-	expectPose(looping.truthAt(50 + 25), mid);
-	expectPose(looping.truthAt(100), scene.from);
+	expect_pose(looping.truthAt(50 + 25), mid);
+	expect_pose(looping.truthAt(100), scene.from);
 }
 
 TEST(SyntheticCamera, FramesHaveTheSizeIncreasingSequencesAndGridTimestamps)
@@ -331,7 +331,7 @@ TEST(SyntheticCamera, NoiseIsFreshPerFrameOverFixedClutter)
 	EXPECT_LE(d.max_abs, 45) << "clutter moved between frames";
 	/* Hot pixels (isolated saturated pixels) sit at the same places in both frames. */
 	const Image &a = frames[0].image;
-	auto isolatedHot = [&](int x, int y) {
+	auto isolated_hot = [&](int x, int y) {
 		if (a.at(x, y) != 255)
 			return false;
 		for (int dy = -1; dy <= 1; ++dy)
@@ -343,7 +343,7 @@ TEST(SyntheticCamera, NoiseIsFreshPerFrameOverFixedClutter)
 	int hot_both = 0, hot_first = 0;
 	for (int y = 1; y < 511; ++y)
 		for (int x = 1; x < 511; ++x)
-			if (isolatedHot(x, y)) {
+			if (isolated_hot(x, y)) {
 				++hot_first;
 				hot_both += frames[1].image.at(x, y) == 255;
 			}
