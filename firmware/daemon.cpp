@@ -16,7 +16,6 @@ namespace {
 constexpr std::int64_t kNsPerMs = 1000000;
 constexpr std::int64_t kNsPerS = 1000000000;
 /* How long an event's fault bit stays set after the event. */
-constexpr std::int64_t kFaultHoldNs = 1 * kNsPerS;
 /* Wait slice of the frame loop: commands, heartbeat and watchdog are served at least this often. */
 constexpr int kWaitSliceMs = 20;
 /* A stalled camera is restarted at most this often. */
@@ -227,14 +226,9 @@ void Daemon::shutdown()
 	const SensorState before = state_machine_.state();
 	state_machine_.shutdown();
 	logState(before, state_machine_.state(), last_sequence_);
-	can::StatusData status;
-	status.state = can::SensorState::Shutdown;
-	status.enabled = enabled_;
+	can::StatusData status = statusFor(can::SensorState::Shutdown, last_faults_);
 	status.strobe = can::StrobeMode::Off;
-	status.faults = last_faults_;
-	can::RawFrame frames[can::kReportFrames];
-	const int n = encoder_.encodeReport(status, nullptr, frames);
-	sendFrames(frames, n);
+	sendReport(status, nullptr);
 	/* Give the last frames a moment to leave a busy queue, without hanging. */
 	for (int i = 0; i < 50 && backends_.can->stats().tx_queued > 0; ++i) {
 		backends_.can->poll();
@@ -269,7 +263,7 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 	/* Behind by more than two frame periods: the loop cannot keep up. */
 	if (frame.timestamp_ns > 0 &&
 	    now_ns - frame.timestamp_ns > 2 * period_ns_ + frame.exposure_us * 1000LL)
-		overrun_until_ns_ = now_ns + kFaultHoldNs;
+		overrun_.raise(now_ns);
 
 	const auto &k = pipeline_->camera().intrinsics();
 	if (!frame.image.valid() || frame.image.width != k.width ||
@@ -356,15 +350,11 @@ void Daemon::processView(const ImageView &view, const hal::Frame &frame)
 		pose_valid = false;
 	logState(before, state, frame.sequence);
 
-	can::StatusData status;
-	status.state = state;
-	status.enabled = enabled_;
+	can::StatusData status = statusFor(state, faults);
 	status.pose_valid = pose_valid;
 	status.tracked = pose_valid && result->tracked;
-	status.strobe = toCan(strobe_mode_);
 	status.leds_used = result ? result->leds_used : 0;
 	status.rms_px = result ? result->rms_px : 0.0;
-	status.faults = faults;
 
 	can::PoseData pose;
 	if (pose_valid) {
@@ -387,9 +377,7 @@ void Daemon::processView(const ImageView &view, const hal::Frame &frame)
 	const std::int64_t latency_ns = frame.timestamp_ns > 0 ? send_ns - frame.timestamp_ns : 0;
 	status.latency_ms = static_cast<double>(latency_ns) * 1e-6;
 
-	can::RawFrame frames[can::kReportFrames];
-	const int n = encoder_.encodeReport(status, pose_valid ? &pose : nullptr, frames);
-	sendFrames(frames, n);
+	const int n = sendReport(status, pose_valid ? &pose : nullptr);
 	++stats_.reports;
 	if (n > 1)
 		++stats_.poses_valid;
@@ -498,14 +486,7 @@ void Daemon::sendStatusOnly(std::int64_t now_ns)
 	const SensorState before = state_machine_.state();
 	const SensorState state = state_machine_.update({ false, faults });
 	logState(before, state, last_sequence_);
-	can::StatusData status;
-	status.state = state;
-	status.enabled = enabled_;
-	status.strobe = toCan(strobe_mode_);
-	status.faults = faults;
-	can::RawFrame frames[can::kReportFrames];
-	const int n = encoder_.encodeReport(status, nullptr, frames);
-	sendFrames(frames, n);
+	sendReport(statusFor(state, faults), nullptr);
 	++stats_.stall_reports;
 }
 
@@ -531,6 +512,27 @@ void Daemon::sendHeartbeat(std::int64_t now_ns)
 	++stats_.heartbeats;
 }
 
+/* The fields every status frame carries; the caller adds the pose's (valid, tracked, LEDs, rms)
+ * and the latency. */
+can::StatusData Daemon::statusFor(SensorState state, std::uint8_t faults) const
+{
+	can::StatusData status;
+	status.state = state;
+	status.enabled = enabled_;
+	status.strobe = toCan(strobe_mode_);
+	status.faults = faults;
+	return status;
+}
+
+/* One report: the pose frames (when `pose` is given) and the status frame. Returns the frames. */
+int Daemon::sendReport(const can::StatusData &status, const can::PoseData *pose)
+{
+	can::RawFrame frames[can::kReportFrames];
+	const int n = encoder_.encodeReport(status, pose, frames);
+	sendFrames(frames, n);
+	return n;
+}
+
 void Daemon::sendFrames(const can::RawFrame *frames, int count)
 {
 	for (int i = 0; i < count; ++i)
@@ -552,7 +554,7 @@ void Daemon::handleCommands()
 			applyCommand(command_decoder_.command());
 		} else if (event == can::Decoder::Event::Rejected) {
 			++stats_.commands_rejected;
-			command_rejected_until_ns_ = hal::monotonicNs() + kFaultHoldNs;
+			command_rejected_.raise(hal::monotonicNs());
 			std::fprintf(log_, "dockposed: command frame 0x%03x rejected: %s\n", in.id,
 				     can::frameErrorName(command_decoder_.lastError()));
 		}
@@ -567,7 +569,7 @@ void Daemon::applyCommand(const can::CommandData &command)
 	const double period_us = 1e6 / config_.camera.frame_rate_hz;
 	if (exposure_us < 10 || exposure_us > period_us || gain < 1.0 || gain > 64.0) {
 		++stats_.commands_rejected;
-		command_rejected_until_ns_ = hal::monotonicNs() + kFaultHoldNs;
+		command_rejected_.raise(hal::monotonicNs());
 		std::fprintf(
 			log_,
 			"dockposed: command rejected: exposure %d us / gain %.1f outside [10, %.0f] us / [1, 64]\n",
@@ -646,37 +648,27 @@ void Daemon::applyStrobeMode(StrobeMode mode)
 std::uint8_t Daemon::activeFaults(std::int64_t now_ns)
 {
 	const hal::CameraStats camera = backends_.camera->stats();
-	if (camera.dropped != seen_camera_drops_) {
-		seen_camera_drops_ = camera.dropped;
-		frames_dropped_until_ns_ = now_ns + kFaultHoldNs;
-	}
+	frames_dropped_.raiseOnChange(camera.dropped, now_ns);
 	const hal::CanStats can_stats = backends_.can->stats();
-	if (can_stats.tx_dropped != seen_can_drops_) {
-		seen_can_drops_ = can_stats.tx_dropped;
-		can_overflow_until_ns_ = now_ns + kFaultHoldNs;
-	}
-	const std::uint64_t strobe_errors = backends_.strobe_control->errorCount();
-	if (strobe_errors != seen_strobe_errors_) {
-		seen_strobe_errors_ = strobe_errors;
-		strobe_error_until_ns_ = now_ns + kFaultHoldNs;
-	}
+	can_overflow_.raiseOnChange(can_stats.tx_dropped, now_ns);
+	strobe_error_.raiseOnChange(backends_.strobe_control->errorCount(), now_ns);
 
 	std::uint8_t faults = 0;
 	if (stalled_ && !camera_failed_)
 		faults |= can::fault::kCameraStall;
 	if (camera_failed_)
 		faults |= can::fault::kCameraError;
-	if (now_ns < strobe_error_until_ns_ || backends_.strobe_control->stalled())
+	if (strobe_error_.active(now_ns) || backends_.strobe_control->stalled())
 		faults |= can::fault::kStrobeError;
-	if (now_ns < can_overflow_until_ns_)
+	if (can_overflow_.active(now_ns))
 		faults |= can::fault::kCanTxOverflow;
 	if (can_stats.state == hal::CanState::BusOff)
 		faults |= can::fault::kCanBusOff;
-	if (now_ns < frames_dropped_until_ns_)
+	if (frames_dropped_.active(now_ns))
 		faults |= can::fault::kFramesDropped;
-	if (now_ns < overrun_until_ns_)
+	if (overrun_.active(now_ns))
 		faults |= can::fault::kLoopOverrun;
-	if (now_ns < command_rejected_until_ns_)
+	if (command_rejected_.active(now_ns))
 		faults |= can::fault::kCommandRejected;
 	last_faults_ = faults;
 	return faults;
@@ -711,7 +703,8 @@ void Daemon::printSummary(std::FILE *out) const
 		out,
 		"dockposed: %.1f s: %llu frames (%.1f/s; lit %llu, unlit %llu, mixed %llu, dropped %llu), "
 		"%llu reports, %llu valid poses; latency p50 %.2f ms, p99 %.2f ms, max %.2f ms; "
-		"pipeline p50 %.2f ms; CAN %llu frames sent, %llu dropped\n",
+		"pipeline p50 %.2f ms; CAN %llu frames sent, %llu dropped; %llu frames numbered but "
+		"never seen, %llu rejected (wrong size)\n",
 		stats_.run_s, static_cast<unsigned long long>(stats_.frames),
 		stats_.run_s > 0 ? static_cast<double>(stats_.frames) / stats_.run_s : 0.0,
 		static_cast<unsigned long long>(stats_.frames_lit),
@@ -723,7 +716,9 @@ void Daemon::printSummary(std::FILE *out) const
 		stats_.latency.quantileMs(0.99), stats_.latency.maxMs(),
 		stats_.pipeline.quantileMs(0.5),
 		static_cast<unsigned long long>(can_stats.tx_frames),
-		static_cast<unsigned long long>(can_stats.tx_dropped));
+		static_cast<unsigned long long>(can_stats.tx_dropped),
+		static_cast<unsigned long long>(stats_.sequence_gaps),
+		static_cast<unsigned long long>(stats_.frames_bad));
 }
 
 } /* namespace dockpose::firmware */

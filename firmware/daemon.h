@@ -31,6 +31,7 @@
 #include "algo/pipeline.h"
 #include "board/board.h"
 #include "firmware/config.h"
+#include "firmware/fault_hold.h"
 #include "firmware/latency_histogram.h"
 #include "firmware/protocol/dockpose_can.h"
 #include "firmware/state_machine.h"
@@ -85,9 +86,7 @@ public:
 
 	SensorState state() const { return state_machine_.state(); }
 	const DaemonStats &stats() const { return stats_; }
-	const PoseResult &lastPose() const { return pipeline_->last(); }
 	StrobeMode strobeMode() const { return strobe_mode_; }
-	TrackMode trackMode() const { return track_mode_; }
 	bool enabled() const { return enabled_; }
 	hal::Strobe *strobe() const { return backends_.strobe.get(); }
 
@@ -103,6 +102,8 @@ private:
 	void handleCommands();
 	void applyCommand(const can::CommandData &command);
 	void applyStrobeMode(StrobeMode mode);
+	can::StatusData statusFor(SensorState state, std::uint8_t faults) const;
+	int sendReport(const can::StatusData &status, const can::PoseData *pose);
 	void sendFrames(const can::RawFrame *frames, int count);
 	void sendStatusOnly(std::int64_t now_ns);
 	void sendHeartbeat(std::int64_t now_ns);
@@ -157,15 +158,13 @@ private:
 	std::int64_t rate_start_ns_ = 0;
 	double frame_rate_hz_ = 0.0;
 
-	/* Fault bookkeeping: events keep their bit for a while after they happen. */
-	std::uint64_t seen_camera_drops_ = 0;
-	std::uint64_t seen_can_drops_ = 0;
-	std::uint64_t seen_strobe_errors_ = 0;
-	std::int64_t frames_dropped_until_ns_ = 0;
-	std::int64_t can_overflow_until_ns_ = 0;
-	std::int64_t strobe_error_until_ns_ = 0;
-	std::int64_t command_rejected_until_ns_ = 0;
-	std::int64_t overrun_until_ns_ = 0;
+	/* Timed faults: events keep their bit for kFaultHoldNs after they happen. */
+	static constexpr std::int64_t kFaultHoldNs = 1000000000;
+	FaultHold frames_dropped_{ kFaultHoldNs };
+	FaultHold can_overflow_{ kFaultHoldNs };
+	FaultHold strobe_error_{ kFaultHoldNs };
+	FaultHold command_rejected_{ kFaultHoldNs };
+	FaultHold overrun_{ kFaultHoldNs };
 	std::uint8_t last_faults_ = 0;
 
 	bool started_ = false;
