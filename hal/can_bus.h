@@ -34,6 +34,19 @@ struct CanFrame {
 	std::int64_t timestamp_ns = 0; /* reception (or send) time, CLOCK_MONOTONIC */
 };
 
+/*
+ * Why a frame cannot go on a bus (nullptr: it can): an id wider than its
+ * format (11 or 29 bits), a classic frame longer than 8 bytes, an FD frame
+ * longer than 64, or an FD frame on a bus opened without FD. Every backend's send() checks with
+ * this one function. Allocates: never.
+ */
+const char *canFrameProblem(const CanFrame &frame, bool fd_enabled);
+/* The CAN FD length len data bytes (0..64) go as: the next of 0..8, 12, 16, 20, 24, 32, 48, 64. */
+std::uint8_t canFdLength(std::uint8_t len);
+/* A frame as it goes on the wire: an FD frame's length rounded up by canFdLength, the padding
+ * zero; a classic frame unchanged. Every backend sends this. Allocates: never. */
+CanFrame canWireFrame(const CanFrame &frame);
+
 /* A received frame passes when (frame.id & mask) == (id & mask). */
 struct CanFilter {
 	std::uint32_t id = 0;

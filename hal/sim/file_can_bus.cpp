@@ -18,7 +18,7 @@ namespace dockpose::hal {
 
 namespace {
 
-constexpr std::size_t kFileBufferBytes = 64 * 1024;
+constexpr std::size_t kFileBufferBytes = std::size_t{ 64 } * 1024;
 constexpr std::size_t kMaxInterfaceName = 32;
 constexpr char kHex[] = "0123456789ABCDEF";
 
@@ -172,7 +172,7 @@ bool FileCanBus::send(const CanFrame &frame)
 		setError(problem, 0);
 		return false;
 	}
-	CanFrame queued = frame;
+	CanFrame queued = canWireFrame(frame);
 	queued.timestamp_ns = monotonicNs();
 	const bool kept = tx_.push(queued);
 	pump();

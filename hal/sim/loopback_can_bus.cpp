@@ -187,7 +187,7 @@ bool LoopbackCanBus::send(const CanFrame &frame)
 		error_ = problem;
 		return false;
 	}
-	const bool kept = tx_.push(frame);
+	const bool kept = tx_.push(canWireFrame(frame));
 	publishQueue();
 	pump();
 	return kept;

@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Helpers shared by the simulated CAN buses (FileCanBus, LoopbackCanBus).
+ * Helpers shared by the simulated CAN buses (FileCanBus, LoopbackCanBus); the
+ * frame validator they share with SocketCAN is hal::canFrameProblem (can_bus.h).
  *
  * Filters work like the kernel's CAN_RAW filters with CAN_EFF_FLAG in the
  * mask: a frame passes a filter when its id format (standard/extended) is
@@ -18,8 +19,5 @@
 namespace dockpose::hal {
 
 bool canFilterPasses(std::span<const CanFilter> filters, const CanFrame &frame);
-
-/* Why a frame cannot be sent (nullptr: it can): id out of range, bad length, FD not enabled. */
-const char *canFrameProblem(const CanFrame &frame, bool fd_enabled);
 
 } /* namespace dockpose::hal */

@@ -339,7 +339,7 @@ bool SocketCanBus::send(const CanFrame &frame)
 		publish();
 		return false;
 	}
-	if (const char *problem = socketcan::frameProblem(frame, fd_)) {
+	if (const char *problem = canFrameProblem(frame, fd_)) {
 		++stats_.tx_errors;
 		setError("can: frame 0x%x not sent on %s: %s", frame.id, interface_.c_str(),
 			 problem);
@@ -565,17 +565,6 @@ void classifyErrorFrame(const can_frame &frame, CanStats *stats)
 	}
 }
 
-const char *frameProblem(const CanFrame &frame, bool fd_enabled)
-{
-	if (frame.extended && frame.id > CAN_EFF_MASK)
-		return "the id is wider than 29 bits";
-	if (!frame.extended && frame.id > CAN_SFF_MASK)
-		return "the id is wider than 11 bits (not marked extended)";
-	if (frame.fd && !fd_enabled)
-		return "a CAN FD frame, and the bus was opened without fd";
-	return nullptr;
-}
-
 namespace {
 
 canid_t kernelId(const CanFrame &frame)
@@ -595,17 +584,6 @@ bool toCanFrame(const CanFrame &frame, can_frame *out)
 	out->can_dlc = len;
 	std::memcpy(out->data, frame.data.data(), len);
 	return true;
-}
-
-std::uint8_t canFdLength(std::uint8_t len)
-{
-	static constexpr std::uint8_t kLengths[] = { 12, 16, 20, 24, 32, 48, 64 };
-	if (len <= 8)
-		return len;
-	for (std::uint8_t l : kLengths)
-		if (len <= l)
-			return l;
-	return CANFD_MAX_DLEN;
 }
 
 bool toCanFdFrame(const CanFrame &frame, canfd_frame *out)
@@ -796,6 +774,7 @@ std::vector<std::string> listInterfaces(const std::string &sys_class_net, bool c
 	}
 	std::sort(found.begin(), found.end());
 	std::vector<std::string> names;
+	names.reserve(found.size());
 	for (auto &f : found)
 		names.push_back(std::move(f.second));
 	return names;

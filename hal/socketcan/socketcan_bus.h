@@ -222,11 +222,9 @@ namespace socketcan {
  */
 void classifyErrorFrame(const can_frame &frame, CanStats *stats);
 
-/* Why frame cannot go on this bus, or nullptr: id too wide, FD on a classic bus. */
-const char *frameProblem(const CanFrame &frame, bool fd_enabled);
 /*
  * CanFrame -> kernel frame: len clamped to 8, EFF flag and 29-bit id when
- * extended. False when the id does not fit (see frameProblem).
+ * extended. False when the id does not fit (see hal::canFrameProblem).
  */
 bool toCanFrame(const CanFrame &frame, can_frame *out);
 /* The same for FD: len clamped to 64, rounded up to a CAN FD length, zero padded. */
@@ -234,8 +232,6 @@ bool toCanFdFrame(const CanFrame &frame, canfd_frame *out);
 /* Kernel frame -> CanFrame; false for error and remote (RTR) frames. Bytes past len are zero. */
 bool fromCanFrame(const can_frame &frame, std::int64_t timestamp_ns, CanFrame *out);
 bool fromCanFdFrame(const canfd_frame &frame, std::int64_t timestamp_ns, CanFrame *out);
-/* The CAN FD length a payload of len bytes travels in (0..8, 12, 16, 20, 24, 32, 48, 64). */
-std::uint8_t canFdLength(std::uint8_t len);
 
 /* CanFilter -> kernel filter: same-kind frames only (EFF flag in the mask), never RTR. */
 can_filter toKernelFilter(const CanFilter &filter);

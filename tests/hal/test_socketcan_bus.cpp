@@ -350,8 +350,13 @@ TEST(SocketCanBus, UnsendableFramesAreRefusedWithoutQueueing)
 	CanFrame ext = frame(0x20000000);
 	ext.extended = true;
 	EXPECT_FALSE(h.bus->send(ext));
+	/* A classic frame of 12 bytes: refused, as the simulated buses refuse it (before the
+	 * shared validator, SocketCAN cut it to 8 bytes and sent it). */
+	EXPECT_FALSE(h.bus->send(frame(0x301, 12)));
+	EXPECT_NE(h.bus->lastError().find("longer than 8 bytes"), std::string::npos)
+		<< h.bus->lastError();
 	const CanStats s = h.bus->stats();
-	EXPECT_EQ(s.tx_errors, 3u);
+	EXPECT_EQ(s.tx_errors, 4u);
 	EXPECT_EQ(s.tx_frames, 0u);
 	EXPECT_EQ(s.tx_dropped, 0u);
 	EXPECT_EQ(h.io->write_calls, 0);
@@ -363,14 +368,14 @@ TEST(SocketCanBus, FdFramesGoAsCanFdMtu)
 	CanFrame f = frame(0x12345678, 10, 1);
 	f.extended = true;
 	f.fd = true;
-	EXPECT_TRUE(h.bus->send(f));
+	EXPECT_TRUE(h.bus->send(f)); /* 10 bytes go as 12, the padding zero */
 	ASSERT_EQ(h.io->written_count, 1);
 	EXPECT_EQ(h.io->written_size[0], CANFD_MTU);
 	const canfd_frame &k = h.io->written[0];
 	EXPECT_EQ(k.can_id, 0x12345678u | CAN_EFF_FLAG);
 	EXPECT_EQ(k.len, 12);
 	EXPECT_EQ(k.data[9], 10);
-	EXPECT_EQ(k.data[10], 0);
+	EXPECT_EQ(k.data[11], 0);
 }
 
 TEST(SocketCanBus, LinkLossQueuesAndReopensEvery500ms)
@@ -860,15 +865,15 @@ TEST(SocketCanPure, ClassicConversion)
 
 TEST(SocketCanPure, FdConversion)
 {
-	EXPECT_EQ(socketcan::canFdLength(0), 0);
-	EXPECT_EQ(socketcan::canFdLength(8), 8);
-	EXPECT_EQ(socketcan::canFdLength(9), 12);
-	EXPECT_EQ(socketcan::canFdLength(13), 16);
-	EXPECT_EQ(socketcan::canFdLength(24), 24);
-	EXPECT_EQ(socketcan::canFdLength(25), 32);
-	EXPECT_EQ(socketcan::canFdLength(33), 48);
-	EXPECT_EQ(socketcan::canFdLength(49), 64);
-	EXPECT_EQ(socketcan::canFdLength(200), 64);
+	EXPECT_EQ(canFdLength(0), 0);
+	EXPECT_EQ(canFdLength(8), 8);
+	EXPECT_EQ(canFdLength(9), 12);
+	EXPECT_EQ(canFdLength(13), 16);
+	EXPECT_EQ(canFdLength(24), 24);
+	EXPECT_EQ(canFdLength(25), 32);
+	EXPECT_EQ(canFdLength(33), 48);
+	EXPECT_EQ(canFdLength(49), 64);
+	EXPECT_EQ(canFdLength(200), 64);
 
 	CanFrame f = frame(0x123, 33, 1);
 	f.fd = true;
@@ -907,16 +912,43 @@ TEST(SocketCanPure, FdConversion)
 	EXPECT_FALSE(socketcan::fromCanFdFrame(in, 5, &back));
 }
 
-TEST(SocketCanPure, FrameProblems)
+/* The validator every backend's send() shares (hal/can_bus.h). */
+TEST(CanFrameProblem, IdsLengthsAndFd)
 {
-	EXPECT_EQ(socketcan::frameProblem(frame(0x7ff), false), nullptr);
-	EXPECT_NE(socketcan::frameProblem(frame(0x800), false), nullptr);
+	EXPECT_EQ(canFrameProblem(frame(0x7ff), false), nullptr);
+	EXPECT_NE(canFrameProblem(frame(0x800), false), nullptr);
 	CanFrame f = frame(0x1fffffff);
 	f.extended = true;
-	EXPECT_EQ(socketcan::frameProblem(f, false), nullptr);
+	EXPECT_EQ(canFrameProblem(f, false), nullptr);
+	f.id = 0x20000000;
+	EXPECT_NE(canFrameProblem(f, false), nullptr);
+	f.id = 0x1fffffff;
 	f.fd = true;
-	EXPECT_NE(socketcan::frameProblem(f, false), nullptr);
-	EXPECT_EQ(socketcan::frameProblem(f, true), nullptr);
+	EXPECT_NE(canFrameProblem(f, false), nullptr);
+	EXPECT_EQ(canFrameProblem(f, true), nullptr);
+	/* Lengths: classic up to 8; FD only its own lengths. */
+	CanFrame classic = frame(0x123);
+	classic.len = 8;
+	EXPECT_EQ(canFrameProblem(classic, true), nullptr);
+	classic.len = 9;
+	EXPECT_NE(canFrameProblem(classic, true), nullptr);
+	for (const int len : { 0, 8, 10, 12, 63, 64 }) {
+		f.len = static_cast<std::uint8_t>(len);
+		EXPECT_EQ(canFrameProblem(f, true), nullptr) << len;
+	}
+	for (const int len : { 65, 255 }) {
+		f.len = static_cast<std::uint8_t>(len);
+		EXPECT_NE(canFrameProblem(f, true), nullptr) << len;
+	}
+	/* On the wire: FD rounded up, zero padded; classic as it is. */
+	f.len = 10;
+	f.data.fill(0xaa);
+	const CanFrame wire = canWireFrame(f);
+	EXPECT_EQ(wire.len, 12);
+	EXPECT_EQ(wire.data[9], 0xaa);
+	EXPECT_EQ(wire.data[10], 0);
+	EXPECT_EQ(wire.data[11], 0);
+	EXPECT_EQ(canWireFrame(classic).len, 9) << "classic frames are not the wire's business";
 }
 
 /* The kernel's CAN_RAW match: (can_id & mask) == (filter.can_id & mask). */
