@@ -1,3 +1,3 @@
 # SPDX-License-Identifier: MIT
-# rpi5-imx296: libcamera, libgpiod and SocketCAN.
-target_link_libraries(dockpose_boards PUBLIC dockpose_hal_libcamera dockpose_hal_gpiod dockpose_hal_socketcan)
+# rpi5-imx296: libcamera, libgpiod and SocketCAN (the hal backends it wires; see CMakeLists.txt).
+set(DOCKPOSE_BOARD_BACKENDS libcamera gpiod socketcan)

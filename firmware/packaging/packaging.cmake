@@ -102,6 +102,12 @@ endif()
 # Runtime library packages, named after the libraries this build links (Debian 12: libcamera 0.0.3
 # is libcamera0.0.3, libgpiod 1.6 is libgpiod2; a board OS with another libcamera, such as
 # Raspberry Pi OS's, has another package name and needs a build against its own -dev package).
+# The package is for a board's hardware: without the real backends (a sim-only DOCKPOSE_BOARDS)
+# there is none to build.
+if(NOT TARGET dockpose_hal_libcamera OR NOT TARGET dockpose_hal_gpiod)
+	message(STATUS "packaging: no Debian package (the boards built here wire no libcamera and libgpiod)")
+	return()
+endif()
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(DOCKPOSE_DEB_LIBCAMERA QUIET libcamera)
 pkg_check_modules(DOCKPOSE_DEB_LIBGPIOD QUIET libgpiod)
