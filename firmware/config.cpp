@@ -260,7 +260,7 @@ public:
 					hint += (i ? ", " : "") + known_[i];
 			}
 			std::string message = "unknown key " + quote(key);
-			message += " " + where + " (" + hint + ")";
+			message.append(" ").append(where).append(" (").append(hint).append(")");
 			checker_->failRaw(message);
 		}
 	}
