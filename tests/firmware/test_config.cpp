@@ -7,6 +7,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <regex>
+#include <set>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -16,6 +20,7 @@
 
 #include "algo/correspondence.h"
 #include "algo/pipeline.h"
+#include "board/board.h"
 #include "firmware/config.h"
 
 namespace dockpose::firmware {
@@ -747,6 +752,104 @@ TEST_F(ConfigTest, ExposureUpToTheFramePeriodIsAccepted)
 	EXPECT_TRUE(loadText(doc.dump()).ok());
 	doc["camera"]["exposure_us"] = 10001;
 	EXPECT_FALSE(loadText(doc.dump()).ok());
+}
+
+/*
+ * docs/configuration.md's key tables against the reader: every section's
+ * keys as the reader knows them (its "unknown key" message lists them) are
+ * exactly the keys the doc's table for that section names, plus the
+ * subsections it documents under their own headings; and the documented
+ * backends of each section are the ones the built boards wire
+ * (board::backendNames). A key added, renamed or dropped on one side only
+ * fails here.
+ */
+std::map<std::string, std::set<std::string>>
+documentedKeys(const std::string &doc, std::map<std::string, std::string> *backends)
+{
+	std::map<std::string, std::set<std::string>> keys;
+	std::string section = "?";
+	std::istringstream in(doc);
+	const std::regex heading(R"(^#{3,4} (Top level|`([a-z_.]+)`)$)");
+	for (std::string line; std::getline(in, line);) {
+		std::smatch m;
+		if (std::regex_match(line, m, heading)) {
+			section = m[2].matched ? m[2].str() : "";
+			keys[section];
+			const std::size_t dot = section.rfind('.');
+			const std::string parent = section.empty() ? "?"
+						   : dot == std::string::npos
+							   ? ""
+							   : section.substr(0, dot);
+			keys[parent].insert(section.substr(dot == std::string::npos ? 0 : dot + 1));
+			continue;
+		}
+		if (line.rfind("## ", 0) == 0) {
+			section = "?";
+			continue;
+		}
+		if (section == "?" || line.rfind("| `", 0) != 0)
+			continue;
+		const std::size_t end = line.find(" |", 2);
+		const std::string first = line.substr(2, end - 2);
+		const std::regex key_re("`([a-z0-9_]+)`");
+		for (auto it = std::sregex_iterator(first.begin(), first.end(), key_re);
+		     it != std::sregex_iterator(); ++it)
+			keys[section].insert((*it)[1].str());
+		if (first == "`backend`") {
+			/* | `backend` | string | **required** | `a`, `b` | ... : the fourth cell. */
+			std::vector<std::string> cells;
+			std::istringstream row(line);
+			for (std::string cell; std::getline(row, cell, '|');)
+				cells.push_back(cell);
+			(*backends)[section] = cells.size() > 4 ? cells[4] : "";
+		}
+	}
+	keys.erase("?");
+	return keys;
+}
+
+TEST_F(ConfigTest, TheDocumentedKeysAreTheReadersKeys)
+{
+	std::map<std::string, std::string> backends;
+	const auto documented = documentedKeys(
+		readText(fs::path(DOCKPOSE_SOURCE_DIR) / "docs" / "configuration.md"), &backends);
+	ASSERT_EQ(documented.size(), 8u) << "sections found in docs/configuration.md";
+	for (const auto &[section, doc_keys] : documented) {
+		SCOPED_TRACE("section \"" + section + "\"");
+		/* Provoke the reader's list of its known keys for this section. */
+		json doc = baseConfig();
+		json *at = &doc;
+		std::istringstream path(section);
+		for (std::string part; std::getline(path, part, '.');)
+			at = &(*at)[part];
+		(*at)["zzzz_not_a_key"] = 1;
+		const ConfigResult r = loadText(doc.dump());
+		ASSERT_EQ(r.errors.size(), 1u) << joinErrors(r.errors);
+		const std::string &e = r.errors[0];
+		const std::size_t from = e.find("known keys: ");
+		ASSERT_NE(from, std::string::npos) << e;
+		std::set<std::string> reader_keys;
+		std::istringstream list(e.substr(from + 12, e.rfind(')') - from - 12));
+		for (std::string k; std::getline(list, k, ',');)
+			reader_keys.insert(k.substr(k.find_first_not_of(' ')));
+		EXPECT_EQ(reader_keys, doc_keys);
+	}
+	const std::pair<const char *, board::BackendKind> kinds[] = {
+		{ "camera", board::BackendKind::Camera },
+		{ "strobe", board::BackendKind::Strobe },
+		{ "can", board::BackendKind::Can },
+	};
+	for (const auto &[section, kind] : kinds) {
+		std::set<std::string> built, doc_names;
+		for (const char *name : board::backendNames(kind))
+			built.insert(name);
+		const std::string &cell = backends[section];
+		const std::regex name_re("`([a-z]+)`");
+		for (auto it = std::sregex_iterator(cell.begin(), cell.end(), name_re);
+		     it != std::sregex_iterator(); ++it)
+			doc_names.insert((*it)[1].str());
+		EXPECT_EQ(doc_names, built) << section << ".backend in docs/configuration.md";
+	}
 }
 
 TEST(StrobeModeName, Names)
