@@ -50,6 +50,23 @@ namespace dockpose::hal {
 
 namespace {
 
+/* Runs its function when it goes out of scope (configure()'s one cleanup). */
+template<typename F>
+class ScopeExit
+{
+public:
+	explicit ScopeExit(F f)
+		: f_(std::move(f))
+	{
+	}
+	~ScopeExit() { f_(); }
+	ScopeExit(const ScopeExit &) = delete;
+	ScopeExit &operator=(const ScopeExit &) = delete;
+
+private:
+	F f_;
+};
+
 namespace lc = libcamera;
 
 constexpr std::uint32_t fourcc(char a, char b, char c, char d)
@@ -201,12 +218,12 @@ std::string sizesText(const lc::StreamFormats &formats, const lc::PixelFormat &f
 /* -------------------------------------------------------------------------- */
 /* Pure helpers */
 
-std::optional<PixelLayout> pixelLayoutForFourcc(std::uint32_t code, std::uint64_t modifier)
+std::optional<PixelLayout> pixelLayoutForFourcc(std::uint32_t fourcc, std::uint64_t modifier)
 {
 	if (modifier != 0)
 		return std::nullopt;
 	for (const auto &entry : kFourccLayouts)
-		if (entry.fourcc == code)
+		if (entry.fourcc == fourcc)
 			return entry.layout;
 	return std::nullopt;
 }
@@ -294,6 +311,11 @@ public:
 	Impl &operator=(const Impl &) = delete;
 
 	Status configure(const CameraConfig &config);
+	/* configure()'s steps; each records its failure with fail(), configure() tears down. */
+	Status acquireCamera(const CameraConfig &config);
+	Status chooseFormat(const CameraConfig &config);
+	Status allocateBuffers();
+	void probeControls();
 	Status start();
 	void stop();
 	/* Everything configure() built; the CameraManager reference too when release_manager. */
@@ -342,6 +364,9 @@ public:
 	void drainQueue();
 	Status mapBuffers(const std::vector<std::unique_ptr<lc::FrameBuffer>> &buffers,
 			  std::size_t count);
+
+private:
+	friend class LibcameraCamera; /* its accessors read the configuration */
 
 	/* Configuration (control thread). */
 	lc::CameraManager *manager_ = nullptr;
@@ -510,57 +535,38 @@ LibcameraCamera::Impl::mapBuffers(const std::vector<std::unique_ptr<lc::FrameBuf
 	return Status::ok();
 }
 
-Status LibcameraCamera::Impl::configure(const CameraConfig &config)
+/* configure(), step 1: pick the camera by id or index, acquire it, connect its signals. */
+Status LibcameraCamera::Impl::acquireCamera(const CameraConfig &config)
 {
-	/* Releases the manager too: a single user restarts it, so cameras are enumerated afresh. */
-	teardown(true);
-	{
-		std::lock_guard lock(error_mutex_);
-		last_error_.clear();
-	}
-
-	if (Status s = checkCameraConfig(config); !s)
-		return fail(s.message());
-	if (event_fd_ < 0)
-		return fail("libcamera: eventfd: " + errnoText(errno));
-	camera_config_ = config;
-
-	if (Status s = acquireManager(&manager_); !s) {
-		manager_ = nullptr;
-		return fail(s.message());
-	}
-
 	/* Pick the camera. */
 	std::vector<std::string> ids;
 	for (const auto &camera : manager_->cameras())
 		ids.push_back(camera->id());
 	std::sort(ids.begin(), ids.end());
 	std::size_t chosen = 0;
-	if (Status s = selectCamera(ids, config.id, config.index, &chosen); !s) {
-		Status r = fail(s.message());
-		teardown(false);
-		return r;
-	}
+	if (Status s = selectCamera(ids, config.id, config.index, &chosen); !s)
+		return fail(s.message());
 	camera_id_ = ids[chosen];
 	camera_ = manager_->get(camera_id_);
-	if (!camera_) {
-		Status r = fail("libcamera: camera \"" + camera_id_ + "\" disappeared");
-		teardown(false);
-		return r;
-	}
-	if (const int ret = camera_->acquire(); ret < 0) {
-		Status r = fail("libcamera: cannot acquire camera \"" + camera_id_ + "\"" +
-				(ret == -EBUSY ? " (in use by another process?)" : "") + ": " +
-				errnoText(ret));
-		teardown(false);
-		return r;
-	}
+	if (!camera_)
+		return fail("libcamera: camera \"" + camera_id_ + "\" disappeared");
+	if (const int ret = camera_->acquire(); ret < 0)
+		return fail("libcamera: cannot acquire camera \"" + camera_id_ + "\"" +
+			    (ret == -EBUSY ? " (in use by another process?)" : "") + ": " +
+			    errnoText(ret));
 	acquired_ = true;
 	camera_->requestCompleted.connect(this, &Impl::requestCompleted);
 	camera_->disconnected.connect(this, &Impl::cameraDisconnected);
 	connected_ = true;
+	return Status::ok();
+}
 
-	/* One processed stream, in the cheapest format with an 8-bit intensity plane. */
+/*
+ * configure(), step 2: one processed stream in the cheapest format with an
+ * 8-bit intensity plane, at the asked size; the camera configured with it.
+ */
+Status LibcameraCamera::Impl::chooseFormat(const CameraConfig &config)
+{
 	for (const lc::StreamRole role :
 	     { lc::StreamRole::VideoRecording, lc::StreamRole::Viewfinder }) {
 		const std::vector<lc::StreamRole> roles{ role };
@@ -568,12 +574,8 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 		if (config_ && !config_->empty())
 			break;
 	}
-	if (!config_ || config_->empty()) {
-		Status r =
-			fail("libcamera: camera \"" + camera_id_ + "\" offers no processed stream");
-		teardown(false);
-		return r;
-	}
+	if (!config_ || config_->empty())
+		return fail("libcamera: camera \"" + camera_id_ + "\" offers no processed stream");
 	lc::StreamConfiguration &stream_config = config_->at(0);
 	const std::vector<lc::PixelFormat> offered = stream_config.formats().pixelformats();
 	std::optional<lc::PixelFormat> best;
@@ -594,11 +596,9 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 		std::string names;
 		for (const auto &format : offered)
 			names += (names.empty() ? "" : ", ") + format.toString();
-		Status r = fail("libcamera: camera \"" + camera_id_ +
-				"\" offers no format with an 8-bit intensity plane (offers: " +
-				names + ")");
-		teardown(false);
-		return r;
+		return fail("libcamera: camera \"" + camera_id_ +
+			    "\" offers no format with an 8-bit intensity plane (offers: " + names +
+			    ")");
 	}
 	stream_config.pixelFormat = *best;
 	if (config.width > 0)
@@ -606,39 +606,27 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 					      static_cast<unsigned int>(config.height));
 	stream_config.bufferCount = static_cast<unsigned int>(config.buffer_count);
 
-	if (config_->validate() == lc::CameraConfiguration::Invalid) {
-		Status r = fail("libcamera: camera \"" + camera_id_ +
-				"\" rejects the configuration " + stream_config.toString());
-		teardown(false);
-		return r;
-	}
+	if (config_->validate() == lc::CameraConfiguration::Invalid)
+		return fail("libcamera: camera \"" + camera_id_ + "\" rejects the configuration " +
+			    stream_config.toString());
 	const auto layout = pixelLayoutForFourcc(stream_config.pixelFormat.fourcc(),
 						 stream_config.pixelFormat.modifier());
-	if (!layout) {
-		Status r = fail("libcamera: camera \"" + camera_id_ + "\" adjusted the format to " +
-				stream_config.pixelFormat.toString() +
-				", which has no 8-bit intensity plane");
-		teardown(false);
-		return r;
-	}
+	if (!layout)
+		return fail("libcamera: camera \"" + camera_id_ + "\" adjusted the format to " +
+			    stream_config.pixelFormat.toString() +
+			    ", which has no 8-bit intensity plane");
 	if (config.width > 0 &&
 	    (stream_config.size.width != static_cast<unsigned int>(config.width) ||
 	     stream_config.size.height != static_cast<unsigned int>(config.height))) {
-		Status r =
-			fail("libcamera: camera \"" + camera_id_ + "\" cannot deliver " +
-			     std::to_string(config.width) + "x" + std::to_string(config.height) +
-			     " " + best->toString() + " (nearest " + stream_config.size.toString() +
-			     "; sizes: " +
-			     sizesText(stream_config.formats(), stream_config.pixelFormat) + ")");
-		teardown(false);
-		return r;
+		return fail("libcamera: camera \"" + camera_id_ + "\" cannot deliver " +
+			    std::to_string(config.width) + "x" + std::to_string(config.height) +
+			    " " + best->toString() + " (nearest " + stream_config.size.toString() +
+			    "; sizes: " +
+			    sizesText(stream_config.formats(), stream_config.pixelFormat) + ")");
 	}
-	if (const int ret = camera_->configure(config_.get()); ret < 0) {
-		Status r = fail("libcamera: configuring camera \"" + camera_id_ + "\" as " +
-				stream_config.toString() + " failed: " + errnoText(ret));
-		teardown(false);
-		return r;
-	}
+	if (const int ret = camera_->configure(config_.get()); ret < 0)
+		return fail("libcamera: configuring camera \"" + camera_id_ + "\" as " +
+			    stream_config.toString() + " failed: " + errnoText(ret));
 
 	layout_ = *layout;
 	format_name_ = stream_config.pixelFormat.toString();
@@ -646,54 +634,49 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	height_ = static_cast<int>(stream_config.size.height);
 	stride_ = static_cast<int>(stream_config.stride);
 	stream_ = stream_config.stream();
-	if (stride_ < minStrideBytes(layout_, width_)) {
-		Status r = fail("libcamera: stream stride " + std::to_string(stride_) +
-				" is too small for " + std::to_string(width_) + " " + format_name_ +
-				" pixels");
-		teardown(false);
-		return r;
-	}
+	if (stride_ < minStrideBytes(layout_, width_))
+		return fail("libcamera: stream stride " + std::to_string(stride_) +
+			    " is too small for " + std::to_string(width_) + " " + format_name_ +
+			    " pixels");
 	frame_bytes_ = static_cast<std::size_t>(stride_) * static_cast<std::size_t>(height_ - 1) +
 		       static_cast<std::size_t>(minStrideBytes(layout_, width_));
+	return Status::ok();
+}
 
-	/* Buffers, mappings and requests: once. */
+/* configure(), step 3: buffers, their mappings and one request each, once. */
+Status LibcameraCamera::Impl::allocateBuffers()
+{
 	allocator_ = std::make_unique<lc::FrameBufferAllocator>(camera_);
 	const int allocated = allocator_->allocate(stream_);
-	if (allocated <= 0) {
-		Status r = fail("libcamera: allocating buffers for camera \"" + camera_id_ +
-				"\" failed: " +
-				(allocated < 0 ? errnoText(allocated) : std::string("no buffers")));
-		teardown(false);
-		return r;
-	}
+	if (allocated <= 0)
+		return fail("libcamera: allocating buffers for camera \"" + camera_id_ +
+			    "\" failed: " +
+			    (allocated < 0 ? errnoText(allocated) : std::string("no buffers")));
 	const auto &buffers = allocator_->buffers(stream_);
 	slot_count_ = std::min<std::size_t>(buffers.size(), kMaxRequests);
 	slots_ = std::make_unique<Slot[]>(slot_count_);
-	if (Status s = mapBuffers(buffers, slot_count_); !s) {
-		teardown(false);
+	if (Status s = mapBuffers(buffers, slot_count_); !s)
 		return s;
-	}
 	for (std::size_t i = 0; i < slot_count_; ++i) {
 		Slot &slot = slots_[i];
 		slot.buffer = buffers[i].get();
 		slot.request = camera_->createRequest(i);
-		if (!slot.request) {
-			Status r = fail("libcamera: cannot create request " + std::to_string(i));
-			teardown(false);
-			return r;
-		}
-		if (const int ret = slot.request->addBuffer(stream_, slot.buffer); ret < 0) {
-			Status r = fail("libcamera: cannot add buffer " + std::to_string(i) +
-					" to its request: " + errnoText(ret));
-			teardown(false);
-			return r;
-		}
+		if (!slot.request)
+			return fail("libcamera: cannot create request " + std::to_string(i));
+		if (const int ret = slot.request->addBuffer(stream_, slot.buffer); ret < 0)
+			return fail("libcamera: cannot add buffer " + std::to_string(i) +
+				    " to its request: " + errnoText(ret));
 		if (!isZeroCopy(layout_))
 			slot.intensity.assign(static_cast<std::size_t>(width_) *
 						      static_cast<std::size_t>(height_),
 					      0);
 	}
+	return Status::ok();
+}
 
+/* configure(), step 4: which of the controls dockpose sets the camera lists. */
+void LibcameraCamera::Impl::probeControls()
+{
 	/*
 	 * find(), not count(): ControlInfoMap::count(id) only asks the id map, and
 	 * pipelines such as vimc build their map over libcamera's global id map
@@ -711,6 +694,45 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	has_exposure_mode_ = lists(lc::controls::ExposureTimeMode);
 	has_gain_mode_ = lists(lc::controls::AnalogueGainMode);
 #endif
+}
+
+Status LibcameraCamera::Impl::configure(const CameraConfig &config)
+{
+	/* Releases the manager too: a single user restarts it, so cameras are enumerated afresh. */
+	teardown(true);
+	{
+		std::lock_guard lock(error_mutex_);
+		last_error_.clear();
+	}
+
+	if (Status s = checkCameraConfig(config); !s)
+		return fail(s.message());
+	if (event_fd_ < 0)
+		return fail("libcamera: eventfd: " + errnoText(errno));
+	camera_config_ = config;
+
+	if (Status s = acquireManager(&manager_); !s) {
+		manager_ = nullptr;
+		return fail(s.message());
+	}
+
+	/*
+	 * From here on, whatever fails tears down what was taken so far: one
+	 * cleanup on every early return (the message is recorded first, as fail()
+	 * is evaluated before the cleanup runs).
+	 */
+	bool configured = false;
+	const ScopeExit cleanup([&] {
+		if (!configured)
+			teardown(false);
+	});
+	if (Status s = acquireCamera(config); !s)
+		return s;
+	if (Status s = chooseFormat(config); !s)
+		return s;
+	if (Status s = allocateBuffers(); !s)
+		return s;
+	probeControls();
 
 	controls_packed_.store(
 		packControls(config.exposure_us, static_cast<float>(config.analogue_gain)));
@@ -720,6 +742,7 @@ Status LibcameraCamera::Impl::configure(const CameraConfig &config)
 	requests_queued_.store(0);
 	queue_failures_.store(0);
 	configured_ = true;
+	configured = true;
 	return Status::ok();
 }
 
