@@ -599,8 +599,7 @@ void readCamera(Section &cam, CameraSection *out, CameraIntrinsics *model)
 
 	if (intrinsics == Got::Ok) {
 		const LoadResult<CameraIntrinsics> k = loadCameraIntrinsics(out->intrinsics);
-		if (k.ok())
-			*model = k.value;
+		*model = k.value; /* the default (empty) model when it did not load */
 		if (!k.ok()) {
 			c.fail(cam.at("intrinsics"), "cannot read camera intrinsics " +
 							     quote(intrinsics_written) + ": " +
@@ -777,8 +776,7 @@ void readPipeline(Section &pl, PipelineSection *out, TargetModel *target_model)
 	bool search_ok = search != Got::Bad;
 	if (target == Got::Ok) {
 		const LoadResult<TargetModel> model = loadTargetModel(out->target);
-		if (model.ok())
-			*target_model = model.value;
+		*target_model = model.value; /* the default (empty) model when it did not load */
 		if (!model.ok()) {
 			c.fail(pl.at("target"), "cannot read target model " +
 							quote(target_written) + ": " + model.error);

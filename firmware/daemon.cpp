@@ -15,7 +15,6 @@ namespace {
 
 constexpr std::int64_t kNsPerMs = 1000000;
 constexpr std::int64_t kNsPerS = 1000000000;
-/* How long an event's fault bit stays set after the event. */
 /* Wait slice of the frame loop: commands, heartbeat and watchdog are served at least this often. */
 constexpr int kWaitSliceMs = 20;
 /* A stalled camera is restarted at most this often. */

@@ -18,7 +18,7 @@ TEST(FaultHold, StartsClearAndHoldsForItsTimeAfterTheLastEvent)
 	EXPECT_TRUE(f.active(5000));
 	EXPECT_TRUE(f.active(5999));
 	EXPECT_FALSE(f.active(6000)) << "held for exactly hold_ns";
-	f.raise(5500); /* a later event extends from itself, an earlier time shortens nothing it must not */
+	f.raise(5500); /* a second event: held for hold_ns from it */
 	EXPECT_TRUE(f.active(6499));
 	EXPECT_FALSE(f.active(6500));
 }
