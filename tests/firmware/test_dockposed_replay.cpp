@@ -5,6 +5,15 @@
  * rendered here, deterministic), its candump log reduced to the report
  * frames, compared with tests/data/replay-can.golden frame by frame.
  *
+ * The same approach runs a second time with the strobe in alternate mode,
+ * against tests/data/replay-can-alternate.golden: the daemon lights the even
+ * frames, so the odd ones are rendered as the unlit exposures they are (LEDs
+ * dark, the clutter still there), and a pose comes from each lit frame minus
+ * the unlit one before it. Which frames were lit is the strobe controller's
+ * record of its pulses against the sensor timestamps, so this run goes
+ * through the period estimate, the pulse scheduling, the ambient frame and
+ * the difference image.
+ *
  * Only what depends on the clock is left out: heartbeats (sent at
  * heartbeat_hz of wall time) and, in DP_Status, the latency signal and the
  * CRC that covers it. Everything else — every pose frame, the alive
@@ -41,8 +50,13 @@ namespace {
 
 const std::string kSource = DOCKPOSE_SOURCE_DIR;
 const std::string kGolden = kSource + "/tests/data/replay-can.golden";
+const std::string kGoldenAlternate = kSource + "/tests/data/replay-can-alternate.golden";
 constexpr int kFrames = 48;
 constexpr double kRateHz = 10.0; /* low: no loop overrun or stall on a loaded machine */
+/* Alternate mode: the pulse's margin around the exposure, wide so that a strobe thread woken a
+ * few milliseconds late on a loaded machine still lights the whole exposure (a mixed frame would
+ * change the bytes). The period is 100 ms: the pulses stay well clear of the unlit frames. */
+constexpr int kAlternatePulseMarginUs = 5000;
 
 std::string slurp(const std::string &path)
 {
@@ -55,9 +69,10 @@ std::string slurp(const std::string &path)
 /*
  * An approach from 1300 mm to 350 mm with rotations easing off, a reflection
  * and hot pixels, the LEDs of one frame in six hidden (a lost-and-found
- * track), frame_%04d.pgm.
+ * track), frame_%04d.pgm. unlit_odd: the odd frames with the LEDs dark, as
+ * the alternate strobe leaves them.
  */
-void renderApproach(const std::string &dir)
+void renderApproach(const std::string &dir, bool unlit_odd)
 {
 	const auto target = dockpose::loadTargetModel(kSource + "/board/sim/target.json");
 	const auto camera = dockpose::loadCameraIntrinsics(kSource + "/board/sim/camera.json");
@@ -77,6 +92,8 @@ void renderApproach(const std::string &dir)
 		options.hot_pixels = 10;
 		if (i % 6 == 5)
 			options.occlusion_mask = 0x3f; /* every LED hidden: the pose is lost */
+		if (unlit_odd && i % 2 != 0)
+			options.led_gain = 0.0;
 		renderer.render(pose, options, 1000 + static_cast<std::uint64_t>(i), &frame,
 				nullptr);
 		char name[32];
@@ -87,7 +104,7 @@ void renderApproach(const std::string &dir)
 }
 
 /* The sim board, its camera replaced by the replay of `frames`, its paths made absolute. */
-std::string writeReplayBoard(const std::string &dir, const std::string &frames)
+std::string writeReplayBoard(const std::string &dir, const std::string &frames, bool alternate)
 {
 	nlohmann::json board = nlohmann::json::parse(slurp(kSource + "/board/sim/board.json"));
 	auto &cam = board["camera"];
@@ -98,7 +115,13 @@ std::string writeReplayBoard(const std::string &dir, const std::string &frames)
 	cam["stall_timeout_ms"] = 10000;
 	cam["intrinsics"] = kSource + "/board/sim/camera.json";
 	board["pipeline"]["target"] = kSource + "/board/sim/target.json";
-	board["strobe"]["mode"] = "off"; /* replayed frames show the LEDs whatever the line does */
+	if (alternate) {
+		board["strobe"]["mode"] = "alternate";
+		board["strobe"]["pulse_margin_us"] = kAlternatePulseMarginUs;
+	} else {
+		/* Replayed frames show the LEDs whatever the line does. */
+		board["strobe"]["mode"] = "off";
+	}
 	std::string path = dir + "/board-replay.json";
 	std::ofstream(path) << board.dump(1, '\t') << "\n";
 	return path;
@@ -133,18 +156,18 @@ std::vector<std::string> reportFrames(const std::string &log, std::uint32_t base
 	return out;
 }
 
-} /* namespace */
-
-TEST(DockposedReplay, TheCanBytesOfAReplayedApproachAreTheRecordedOnes)
+/*
+ * Render the approach, replay it through dockposed, compare its report frames with `golden`
+ * (or write them there under DOCKPOSE_UPDATE_GOLDEN). min_poses: the valid poses the run must
+ * send for the comparison to mean much.
+ */
+void checkReplay(bool alternate, const std::string &golden_path, int min_poses)
 {
-#if !defined(__x86_64__)
-	GTEST_SKIP() << "the golden CAN bytes are x86_64's";
-#endif
 	char dir_template[] = "/tmp/dockposed-replay.XXXXXX";
 	ASSERT_NE(mkdtemp(dir_template), nullptr);
 	const std::string dir = dir_template;
-	renderApproach(dir + "/frames");
-	const std::string board = writeReplayBoard(dir, dir + "/frames");
+	renderApproach(dir + "/frames", alternate);
+	const std::string board = writeReplayBoard(dir, dir + "/frames", alternate);
 	const std::string log = dir + "/can.log";
 	const std::string err = dir + "/stderr.txt";
 	/* --for only bounds a hang: the replay ends when its frames run out. */
@@ -161,20 +184,21 @@ TEST(DockposedReplay, TheCanBytesOfAReplayedApproachAreTheRecordedOnes)
 		std::stoul(board_json.at("can").at("base_id").get<std::string>(), nullptr, 16));
 	const std::vector<std::string> got = reportFrames(log, base_id);
 	if (std::getenv("DOCKPOSE_UPDATE_GOLDEN")) {
-		std::ofstream golden(kGolden, std::ios::trunc);
-		golden << "# dockposed's report frames for tests/firmware/test_dockposed_replay.cpp (x86_64);\n"
+		std::ofstream golden(golden_path, std::ios::trunc);
+		golden << "# dockposed's report frames for tests/firmware/test_dockposed_replay.cpp (x86_64"
+		       << (alternate ? ", strobe alternate" : "") << ");\n"
 		       << "# DP_Status latency and CRC zeroed, heartbeats left out. Regenerate only for an\n"
 		       << "# intended change of the CAN output: DOCKPOSE_UPDATE_GOLDEN=1.\n";
 		for (const std::string &f : got)
 			golden << f << "\n";
-		std::printf("wrote %zu frames to %s\n", got.size(), kGolden.c_str());
+		std::printf("wrote %zu frames to %s\n", got.size(), golden_path.c_str());
 	}
 	std::vector<std::string> want;
-	std::istringstream in(slurp(kGolden));
+	std::istringstream in(slurp(golden_path));
 	for (std::string line; std::getline(in, line);)
 		if (!line.empty() && line[0] != '#')
 			want.push_back(line);
-	ASSERT_FALSE(want.empty()) << "no golden frames in " << kGolden;
+	ASSERT_FALSE(want.empty()) << "no golden frames in " << golden_path;
 
 	/* Every valid pose frame sent: a report with a pose is kReportFrames frames. */
 	char translation_id[8];
@@ -183,12 +207,32 @@ TEST(DockposedReplay, TheCanBytesOfAReplayedApproachAreTheRecordedOnes)
 	int poses = 0;
 	for (const std::string &f : got)
 		poses += f.rfind(translation_id, 0) == 0;
-	EXPECT_GE(poses, kFrames / 2) << "too few poses for the check to mean much";
+	EXPECT_GE(poses, min_poses) << "too few poses for the check to mean much";
 
 	for (std::size_t i = 0; i < std::min(got.size(), want.size()); ++i)
-		ASSERT_EQ(got[i], want[i]) << "CAN frame " << i << " of " << want.size()
-					   << " differs from " << kGolden << "; dockposed said:\n"
-					   << stderr_text;
+		ASSERT_EQ(got[i], want[i])
+			<< "CAN frame " << i << " of " << want.size() << " differs from "
+			<< golden_path << "; dockposed said:\n"
+			<< stderr_text;
 	EXPECT_EQ(got.size(), want.size()) << "frames sent, against the golden's";
 	std::filesystem::remove_all(dir);
+}
+
+} /* namespace */
+
+TEST(DockposedReplay, TheCanBytesOfAReplayedApproachAreTheRecordedOnes)
+{
+#if !defined(__x86_64__)
+	GTEST_SKIP() << "the golden CAN bytes are x86_64's";
+#endif
+	checkReplay(false, kGolden, kFrames / 2);
+}
+
+TEST(DockposedReplay, TheCanBytesOfAReplayedApproachWithAlternateStrobeAreTheRecordedOnes)
+{
+#if !defined(__x86_64__)
+	GTEST_SKIP() << "the golden CAN bytes are x86_64's";
+#endif
+	/* Only the even (lit) frames are processed: a pose from most of them. */
+	checkReplay(true, kGoldenAlternate, kFrames / 2 - kFrames / 8);
 }
