@@ -3,10 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <string>
 
-#include "algo/ambient.h"
 #include "hal/clock.h"
 
 namespace dockpose::firmware {
@@ -68,12 +66,34 @@ PipelineConfig pipelineConfig(const PipelineSection &section)
 	return config;
 }
 
+std::int64_t framePeriodNs(const BoardConfig &config)
+{
+	return static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz);
+}
+
+/* Frames of the camera model's size; none when the model was not loaded (start() refuses). */
+AlternateStrobeConfig alternateStrobeConfig(const BoardConfig &config)
+{
+	AlternateStrobeConfig alternate;
+	const CameraIntrinsics &intrinsics = config.camera_model;
+	if (intrinsics.width > 0 && intrinsics.height > 0) {
+		alternate.width = intrinsics.width;
+		alternate.height = intrinsics.height;
+	}
+	alternate.period_ns = framePeriodNs(config);
+	alternate.max_interval_ns =
+		static_cast<std::int64_t>(config.camera.stall_timeout_ms) * kNsPerMs;
+	alternate.pulse_margin_ns = static_cast<std::int64_t>(config.strobe.pulse_margin_us) * 1000;
+	return alternate;
+}
+
 } /* namespace */
 
 Daemon::Daemon(const BoardConfig &config, board::Backends backends, std::FILE *log)
 	: config_(config),
 	  backends_(std::move(backends)),
 	  log_(log),
+	  alternate_(alternateStrobeConfig(config)),
 	  state_machine_(config.pipeline.lost_after_frames, config.pipeline.degraded_hold_frames),
 	  encoder_(config.can.base_id),
 	  command_decoder_(config.can.base_id),
@@ -82,19 +102,15 @@ Daemon::Daemon(const BoardConfig &config, board::Backends backends, std::FILE *l
 	  track_mode_(config.pipeline.mode),
 	  exposure_us_(config.camera.exposure_us),
 	  gain_(config.camera.analogue_gain),
-	  period_ns_(static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz)),
-	  measured_period_ns_(period_ns_)
+	  period_ns_(framePeriodNs(config))
 {
 	/* The configuration was validated: both models loaded (an empty one is a bug upstream,
 	 * reported by start()). */
 	const TargetModel &target = config_.target_model;
 	const CameraIntrinsics &intrinsics = config_.camera_model;
-	if (!target.points_mm.empty() && intrinsics.width > 0 && intrinsics.height > 0) {
+	if (!target.points_mm.empty() && intrinsics.width > 0 && intrinsics.height > 0)
 		pipeline_ = std::make_unique<Pipeline>(target, intrinsics,
 						       pipelineConfig(config_.pipeline));
-		ambient_ = Image(intrinsics.width, intrinsics.height);
-		difference_ = Image(intrinsics.width, intrinsics.height);
-	}
 }
 
 Daemon::~Daemon()
@@ -241,7 +257,39 @@ void Daemon::shutdown()
 	backends_.strobe->close();
 }
 
+/*
+ * One frame, top to bottom. The camera backend's completion queued it (hal::FrameQueue) and
+ * run() took it with waitFrame(); run() releases it after this returns.
+ */
 void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
+{
+	/* Counts, sequence gaps, overrun; a frame of the wrong size goes no further. */
+	if (!acceptFrame(frame, now_ns))
+		return;
+
+	/* The sensor's period, from every frame; in alternate mode, the next pulses aimed with it. */
+	alternate_.measurePeriod(frame);
+	if (strobe_mode_ == StrobeMode::Alternate && enabled_)
+		alternate_.schedulePulses(frame, hal::monotonicNs(), *backends_.strobe_control);
+
+	/* Lit, unlit or mixed: the strobe's history against the exposure window. */
+	const hal::Lighting lighting = classifyLighting(frame);
+
+	/* What the pipeline reads in this strobe mode (alternate: lit − last unlit); nothing: the
+	 * frame gives no report. */
+	const std::optional<ImageView> input = pipelineInput(frame, lighting);
+	if (!input)
+		return;
+
+	/* Pixels → pose; disabled (an invalid view): a report without a pose. */
+	const PoseResult *result = input->valid() ? runPipeline(*input) : nullptr;
+
+	/* State machine → encoder → CAN. */
+	reportFrame(frame, result);
+}
+
+/* The frame's bookkeeping. False: the frame is not of the camera model's size (counted). */
+bool Daemon::acceptFrame(const hal::Frame &frame, std::int64_t now_ns)
 {
 	++stats_.frames;
 	++rate_frames_;
@@ -272,13 +320,14 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 				log_,
 				"dockposed: rejecting a %dx%d frame (expected %dx%d); counting further ones\n",
 				frame.image.width, frame.image.height, k.width, k.height);
-		return;
+		return false;
 	}
+	return true;
+}
 
-	measurePeriod(frame);
-	if (strobe_mode_ == StrobeMode::Alternate && enabled_)
-		scheduleAlternatePulses(frame);
-
+/* How the LEDs were during the frame's exposure (counted). */
+hal::Lighting Daemon::classifyLighting(const hal::Frame &frame)
+{
 	const std::int64_t exposure_end_ns =
 		frame.timestamp_ns + static_cast<std::int64_t>(frame.exposure_us) * 1000;
 	const hal::Lighting lighting =
@@ -294,51 +343,52 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 		++stats_.frames_mixed;
 		break;
 	}
-
-	if (!enabled_) {
-		processView(ImageView{}, frame);
-		return;
-	}
-
-	switch (strobe_mode_) {
-	case StrobeMode::Off:
-		processView(frame.image, frame);
-		break;
-	case StrobeMode::Constant:
-		if (lighting == hal::Lighting::Lit)
-			processView(frame.image, frame);
-		break;
-	case StrobeMode::Alternate:
-		if (lighting == hal::Lighting::Unlit) {
-			for (int y = 0; y < frame.image.height; ++y)
-				std::memcpy(ambient_.data() + static_cast<std::ptrdiff_t>(y) *
-								      ambient_.width(),
-					    frame.image.row(y),
-					    static_cast<std::size_t>(frame.image.width));
-			ambient_sequence_ = frame.sequence;
-			have_ambient_ = true;
-		} else if (lighting == hal::Lighting::Lit && have_ambient_ &&
-			   frame.sequence - ambient_sequence_ <= 2) {
-			subtractAmbient(frame.image, ambient_.view(), difference_.data(),
-					difference_.width());
-			processView(difference_.view(), frame);
-		}
-		break;
-	}
+	return lighting;
 }
 
-void Daemon::processView(const ImageView &view, const hal::Frame &frame)
+/*
+ * The view the pipeline reads for this frame: the frame itself (strobe off; constant, when lit),
+ * the lit − unlit difference (alternate), an invalid view when disabled (a report without a
+ * pose), or nothing (no report: a frame the mode does not use).
+ */
+std::optional<ImageView> Daemon::pipelineInput(const hal::Frame &frame, hal::Lighting lighting)
 {
-	const PoseResult *result = nullptr;
-	if (view.valid()) {
-		if (track_mode_ == TrackMode::SearchOnly)
-			pipeline_->reset();
-		const std::int64_t t0_ns = hal::monotonicNs();
-		result = &pipeline_->process(view);
-		stats_.pipeline.add(hal::monotonicNs() - t0_ns);
-		++stats_.processed;
+	if (!enabled_)
+		return ImageView{};
+	switch (strobe_mode_) {
+	case StrobeMode::Off:
+		return frame.image;
+	case StrobeMode::Constant:
+		if (lighting == hal::Lighting::Lit)
+			return frame.image;
+		return std::nullopt;
+	case StrobeMode::Alternate:
+		/* An unlit frame is kept as the ambient frame; a lit one gives the difference. */
+		if (const ImageView difference = alternate_.difference(frame, lighting);
+		    difference.valid())
+			return difference;
+		return std::nullopt;
 	}
+	return std::nullopt;
+}
 
+/* Pipeline::process on a valid view, timed. The result is the pipeline's, valid until the next
+ * call. */
+const PoseResult *Daemon::runPipeline(const ImageView &view)
+{
+	if (track_mode_ == TrackMode::SearchOnly)
+		pipeline_->reset();
+	const std::int64_t t0_ns = hal::monotonicNs();
+	const PoseResult *result = &pipeline_->process(view);
+	stats_.pipeline.add(hal::monotonicNs() - t0_ns);
+	++stats_.processed;
+	return result;
+}
+
+/* The state machine's step for a processed frame (result: null when the pipeline did not run),
+ * and its report on CAN: the pose frames when the pose is valid, the status frame. */
+void Daemon::reportFrame(const hal::Frame &frame, const PoseResult *result)
+{
 	const std::int64_t now_ns = hal::monotonicNs();
 	const std::uint8_t faults = activeFaults(now_ns);
 	bool pose_valid = result && result->found && enabled_;
@@ -383,65 +433,6 @@ void Daemon::processView(const ImageView &view, const hal::Frame &frame)
 	stats_.latency.add(latency_ns);
 }
 
-void Daemon::measurePeriod(const hal::Frame &frame)
-{
-	if (frame.timestamp_ns <= 0)
-		return;
-	if (have_period_sample_ && frame.sequence > period_sequence_ &&
-	    frame.timestamp_ns > period_timestamp_ns_) {
-		const std::int64_t interval_ns =
-			(frame.timestamp_ns - period_timestamp_ns_) /
-			static_cast<std::int64_t>(frame.sequence - period_sequence_);
-		/* Intervals across a stall say nothing about the frame grid. */
-		if (interval_ns <
-		    static_cast<std::int64_t>(config_.camera.stall_timeout_ms) * kNsPerMs) {
-			if (!have_period_measured_)
-				measured_period_ns_ = interval_ns;
-			else
-				measured_period_ns_ += (interval_ns - measured_period_ns_) / 8;
-			have_period_measured_ = true;
-		}
-	}
-	have_period_sample_ = true;
-	period_sequence_ = frame.sequence;
-	period_timestamp_ns_ = frame.timestamp_ns;
-}
-
-void Daemon::scheduleAlternatePulses(const hal::Frame &frame)
-{
-	if (frame.timestamp_ns <= 0)
-		return;
-	/* Light every even frame: aim a pulse at the predicted exposure of the next even frames
-	 * that are not yet scheduled. The exposure grid comes from the sensor's own timestamps: this
-	 * frame's start of exposure and the period measured between frames. */
-	const std::int64_t margin_ns =
-		static_cast<std::int64_t>(config_.strobe.pulse_margin_us) * 1000;
-	const std::int64_t exposure_ns = static_cast<std::int64_t>(frame.exposure_us) * 1000;
-	/* Frames may reach us several periods after their exposure (a slow pipeline, an emulated
-	 * machine): look as far ahead as it takes to find exposures that have not begun, and keep
-	 * two pulses scheduled. */
-	const std::int64_t lead_ns = hal::monotonicNs() + 200000;
-	int scheduled = 0;
-	for (std::uint64_t k = 1; k <= 64 && scheduled < 2; ++k) {
-		const std::uint64_t target = frame.sequence + k;
-		if (target % 2 != 0)
-			continue;
-		const std::int64_t start_ns = frame.timestamp_ns +
-					      static_cast<std::int64_t>(k) * measured_period_ns_ -
-					      margin_ns;
-		if (start_ns < lead_ns)
-			continue;
-		if (last_scheduled_sequence_ && target <= last_scheduled_sequence_) {
-			++scheduled;
-			continue;
-		}
-		if (!backends_.strobe_control->schedulePulse(start_ns, exposure_ns + 2 * margin_ns))
-			break;
-		last_scheduled_sequence_ = target;
-		++scheduled;
-	}
-}
-
 void Daemon::handleStall(std::int64_t now_ns)
 {
 	const std::int64_t stall_ns =
@@ -455,7 +446,7 @@ void Daemon::handleStall(std::int64_t now_ns)
 			     camera_failed_ ? "camera failed" : "camera stalls",
 			     static_cast<long long>((now_ns - last_frame_ns_) / kNsPerMs));
 		backends_.strobe_control->setOn(false);
-		have_ambient_ = false;
+		alternate_.forgetAmbient();
 		last_stall_report_ns_ = 0;
 		last_restart_ns_ = now_ns;
 	}
@@ -624,8 +615,7 @@ void Daemon::applyStrobeMode(StrobeMode mode)
 	if (pipeline_ && mode != strobe_mode_)
 		pipeline_->readWhole(kWholeFramesAfterLightChange);
 	strobe_mode_ = mode;
-	have_ambient_ = false;
-	last_scheduled_sequence_ = 0;
+	alternate_.restart();
 	hal::StrobeController &control = *backends_.strobe_control;
 	if (!enabled_ || stalled_) {
 		control.setOn(false);

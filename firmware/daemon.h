@@ -1,12 +1,15 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * Daemon: the sensor. It owns a board's backends (board/board.h), the vision
- * pipeline and the CAN protocol, and runs the frame loop:
+ * pipeline and the CAN protocol, and runs the frame loop (handleFrame, top to
+ * bottom):
  *
- *   camera frame ─► lit / unlit / mixed (strobe history vs. exposure window)
- *                ─► [alternate: lit − last unlit] ─► Pipeline ─► state machine
- *                ─► pose frames + status frame on CAN (latency measured from
- *                   the sensor timestamp to the send)
+ *   camera frame (the backend's completion ─► hal::FrameQueue ─► waitFrame)
+ *                ─► lit / unlit / mixed (strobe history vs. exposure window)
+ *                ─► [alternate: lit − last unlit, AlternateStrobe] ─► Pipeline
+ *                ─► state machine ─► can::Encoder ─► pose frames + status
+ *                   frame on CAN (latency measured from the sensor timestamp
+ *                   to the send)
  *
  * and between frames: command frames from the arm controller, the heartbeat,
  * the systemd watchdog, the strobe's dead-man switch, and stall detection
@@ -17,7 +20,7 @@
  * pipeline found it, the state is not fault, and it fits the protocol's ranges.
  *
  * Allocates: the constructor and start() allocate every buffer (pipeline,
- * ambient frame, difference frame); the frame loop does not allocate except
+ * AlternateStrobe's ambient and difference frames); the frame loop does not allocate except
  * in log lines on state changes and in systemd status text (once a second).
  */
 #pragma once
@@ -26,10 +29,12 @@
 #include <cstdint>
 #include <cstdio>
 #include <memory>
+#include <optional>
 
 #include "algo/image.h"
 #include "algo/pipeline.h"
 #include "board/board.h"
+#include "firmware/alternate_strobe.h"
 #include "firmware/config.h"
 #include "firmware/fault_hold.h"
 #include "firmware/latency_histogram.h"
@@ -94,10 +99,14 @@ public:
 	void printSummary(std::FILE *out) const;
 
 private:
+	/* The frame path: handleFrame calls the next four in this order. Allocates: never. */
 	void handleFrame(const hal::Frame &frame, std::int64_t now_ns);
-	void processView(const ImageView &view, const hal::Frame &frame);
-	void measurePeriod(const hal::Frame &frame);
-	void scheduleAlternatePulses(const hal::Frame &frame);
+	bool acceptFrame(const hal::Frame &frame, std::int64_t now_ns);
+	hal::Lighting classifyLighting(const hal::Frame &frame);
+	std::optional<ImageView> pipelineInput(const hal::Frame &frame, hal::Lighting lighting);
+	const PoseResult *runPipeline(const ImageView &view);
+	void reportFrame(const hal::Frame &frame, const PoseResult *result);
+
 	void handleStall(std::int64_t now_ns);
 	void handleCommands();
 	void applyCommand(const can::CommandData &command);
@@ -115,6 +124,7 @@ private:
 	board::Backends backends_;
 	std::FILE *log_;
 	std::unique_ptr<Pipeline> pipeline_;
+	AlternateStrobe alternate_;
 	StateMachine state_machine_;
 	can::Encoder encoder_;
 	can::Decoder command_decoder_;
@@ -128,22 +138,8 @@ private:
 	int exposure_us_;
 	double gain_;
 
-	/* Alternate mode: the last unlit frame and the difference image. */
-	Image ambient_;
-	std::uint64_t ambient_sequence_ = 0;
-	bool have_ambient_ = false;
-	Image difference_;
-	std::uint64_t last_scheduled_sequence_ = 0;
-	std::int64_t period_ns_; /* configured frame period */
-	/* The sensor's real frame period, from its timestamps (smoothed); pulses are aimed with it.
-	 * Starts at the configured period, which a camera that ignores frame_rate_hz does not keep. */
-	std::int64_t measured_period_ns_;
-	bool have_period_sample_ = false;
-	bool have_period_measured_ = false;
-	std::uint64_t period_sequence_ = 0;
-	std::int64_t period_timestamp_ns_ = 0;
-
 	/* Frame bookkeeping. */
+	std::int64_t period_ns_; /* configured frame period: the overrun bound */
 	bool have_sequence_ = false;
 	std::uint64_t last_sequence_ = 0;
 	std::int64_t last_frame_ns_ = 0;
