@@ -8,7 +8,7 @@
 
 namespace dockpose {
 
-std::string CameraIntrinsics::validate() const
+Status CameraIntrinsics::validate() const
 {
 	std::ostringstream err;
 	if (width <= 0 || height <= 0 || width > 16384 || height > 16384)
@@ -26,7 +26,9 @@ std::string CameraIntrinsics::validate() const
 		 std::abs(p1) > 1.0 || std::abs(p2) > 1.0)
 		err << "camera distortion k1=" << k1 << " k2=" << k2 << " p1=" << p1 << " p2=" << p2
 		    << " is out of range";
-	return err.str();
+	else
+		return Status::ok();
+	return Status::error(err.str());
 }
 
 CameraModel::CameraModel(const CameraIntrinsics &intrinsics)

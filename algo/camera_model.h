@@ -12,6 +12,8 @@
 
 #include <Eigen/Core>
 
+#include "algo/status.h"
+
 namespace dockpose {
 
 struct CameraIntrinsics {
@@ -35,8 +37,8 @@ struct CameraIntrinsics {
 		}
 	} sigma;
 
-	/* Empty when valid, else a sentence naming the bad value. Allocates: the message. */
-	std::string validate() const;
+	/* Ok when valid, else an error naming the bad value. Allocates: the message. */
+	Status validate() const;
 };
 
 class CameraModel

@@ -35,7 +35,7 @@ void TargetModel::frontNormals(StaticVector<Eigen::Vector3d, kMaxFaces> *normals
 	}
 
 	/* Does face g contain the directed edge a -> b? */
-	auto hasEdge = [&](std::size_t g, int a, int b) {
+	auto has_edge = [&](std::size_t g, int a, int b) {
 		for (int k = 0; k < 4; ++k)
 			if (faces[g][k] == a && faces[g][(k + 1) % 4] == b)
 				return true;
@@ -60,8 +60,8 @@ void TargetModel::frontNormals(StaticVector<Eigen::Vector3d, kMaxFaces> *normals
 					continue;
 				for (int k = 0; k < 4; ++k) {
 					const int a = faces[f][k], b = faces[f][(k + 1) % 4];
-					const bool same = hasEdge(g, a, b);
-					if (!same && !hasEdge(g, b, a))
+					const bool same = has_edge(g, a, b);
+					if (!same && !has_edge(g, b, a))
 						continue;
 					if (same)
 						(*normals)[g] = -(*normals)[g];
@@ -96,22 +96,23 @@ void TargetModel::frontNormals(StaticVector<Eigen::Vector3d, kMaxFaces> *normals
 	}
 }
 
-std::string TargetModel::validate() const
+Status TargetModel::validate() const
 {
 	std::ostringstream err;
 	if (points_mm.size() < 4) {
 		err << "target '" << name << "' has " << points_mm.size()
 		    << " LEDs; at least 4 (one face) are needed";
-		return err.str();
+		return Status::error(err.str());
 	}
 	if (faces.empty()) {
 		err << "target '" << name
 		    << "' has no faces; at least one quadrilateral face is needed";
-		return err.str();
+		return Status::error(err.str());
 	}
 	for (const auto &p : points_mm)
 		if (!p.allFinite())
-			return "target '" + name + "' has a non-finite LED coordinate";
+			return Status::error("target '" + name +
+					     "' has a non-finite LED coordinate");
 
 	const double diameter = diameterMm();
 	for (std::size_t i = 0; i < points_mm.size(); ++i)
@@ -119,7 +120,7 @@ std::string TargetModel::validate() const
 			if ((points_mm[i] - points_mm[j]).norm() < 1e-3 * diameter) {
 				err << "target '" << name << "': LEDs " << i << " and " << j
 				    << " coincide";
-				return err.str();
+				return Status::error(err.str());
 			}
 
 	for (std::size_t f = 0; f < faces.size(); ++f) {
@@ -129,13 +130,13 @@ std::string TargetModel::validate() const
 				err << "target '" << name << "': face " << f << " names LED "
 				    << face[k] << ", but the model has LEDs 0.."
 				    << points_mm.size() - 1;
-				return err.str();
+				return Status::error(err.str());
 			}
 			for (int m = 0; m < k; ++m)
 				if (face[m] == face[k]) {
 					err << "target '" << name << "': face " << f
 					    << " lists LED " << face[k] << " twice";
-					return err.str();
+					return Status::error(err.str());
 				}
 		}
 		/* Planarity: distance of each vertex from the plane of the other three. */
@@ -148,7 +149,7 @@ std::string TargetModel::validate() const
 		if (n_norm < 1e-6 * scale * scale) {
 			err << "target '" << name << "': face " << f
 			    << " is degenerate (its diagonals are parallel)";
-			return err.str();
+			return Status::error(err.str());
 		}
 		const Eigen::Vector3d unit = n / n_norm;
 		const Eigen::Vector3d centre = (p[0] + p[1] + p[2] + p[3]) / 4.0;
@@ -158,7 +159,7 @@ std::string TargetModel::validate() const
 				    << " is not planar (LED " << face[k] << " is "
 				    << std::abs(unit.dot(p[k] - centre))
 				    << " mm off the face's plane)";
-				return err.str();
+				return Status::error(err.str());
 			}
 		/* Convexity in cyclic order: all turns have the same sign w.r.t. n. */
 		int sign = 0;
@@ -170,12 +171,12 @@ std::string TargetModel::validate() const
 			if (std::abs(turn) < 1e-6 * scale * scale || (sign != 0 && s != sign)) {
 				err << "target '" << name << "': face " << f
 				    << " is not a convex quadrilateral in the listed cyclic order";
-				return err.str();
+				return Status::error(err.str());
 			}
 			sign = s;
 		}
 	}
-	return {};
+	return Status::ok();
 }
 
 } /* namespace dockpose */

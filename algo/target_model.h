@@ -14,6 +14,7 @@
 
 #include "algo/capacities.h"
 #include "algo/static_vector.h"
+#include "algo/status.h"
 
 namespace dockpose {
 
@@ -39,10 +40,10 @@ struct TargetModel {
 	/*
 	 * Check the model: capacities, indices in range, distinct LEDs, every
 	 * face planar (within tolerance), convex and non-degenerate.
-	 * Returns an empty string when valid, else a sentence naming the problem.
-	 * Allocates: the returned message only.
+	 * Ok when valid, else an error whose message names the problem.
+	 * Allocates: the error message only.
 	 */
-	std::string validate() const;
+	Status validate() const;
 
 	/* Size of the target: largest distance between two LEDs, in mm. */
 	double diameterMm() const;

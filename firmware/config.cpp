@@ -598,14 +598,14 @@ void readCamera(Section &cam, CameraSection *out, CameraIntrinsics *model)
 	}
 
 	if (intrinsics == Got::Ok) {
-		const LoadResult<CameraIntrinsics> k = loadCameraIntrinsics(out->intrinsics);
-		*model = k.value; /* the default (empty) model when it did not load */
-		if (!k.ok()) {
+		const Result<CameraIntrinsics> k = loadCameraIntrinsics(out->intrinsics);
+		*model = k ? k.value() : CameraIntrinsics{}; /* empty when it did not load */
+		if (!k) {
 			c.fail(cam.at("intrinsics"), "cannot read camera intrinsics " +
 							     quote(intrinsics_written) + ": " +
-							     k.error);
+							     k.message());
 		} else if (width != Got::Bad && height != Got::Bad) {
-			const int w = k.value.width, h = k.value.height;
+			const int w = k->width, h = k->height;
 			if ((out->width != 0 && out->width != w) ||
 			    (out->height != 0 && out->height != h)) {
 				c.fail(cam.at("intrinsics"),
@@ -775,19 +775,21 @@ void readPipeline(Section &pl, PipelineSection *out, TargetModel *target_model)
 
 	bool search_ok = search != Got::Bad;
 	if (target == Got::Ok) {
-		const LoadResult<TargetModel> model = loadTargetModel(out->target);
-		*target_model = model.value; /* the default (empty) model when it did not load */
-		if (!model.ok()) {
+		const Result<TargetModel> model = loadTargetModel(out->target);
+		*target_model = model ? model.value()
+				      : TargetModel{}; /* empty when it did not load */
+		if (!model) {
 			c.fail(pl.at("target"), "cannot read target model " +
-							quote(target_written) + ": " + model.error);
+							quote(target_written) + ": " +
+							model.message());
 		} else if (search_ok) {
-			const std::size_t leds = model.value.points_mm.size();
+			const std::size_t leds = model->points_mm.size();
 			if (static_cast<std::size_t>(out->min_leds_search) > leds) {
 				c.fail(pl.at("min_leds_search"),
 				       std::to_string(out->min_leds_search) +
 					       (search == Got::Absent ? " (the default)" : "") +
 					       " is more than the " + std::to_string(leds) +
-					       " LEDs of target " + quote(model.value.name));
+					       " LEDs of target " + quote(model->name));
 				search_ok = false;
 			}
 		}
@@ -935,19 +937,18 @@ ConfigResult parseBoardConfig(const std::string &json_text, const std::string &b
 
 ConfigResult loadBoardConfig(const std::string &path)
 {
-	std::string text;
-	const std::string error = readFileContents(path, &text);
-	if (!error.empty()) {
+	const Result<std::string> text = readFileContents(path);
+	if (!text) {
 		ConfigResult result;
 		result.config.path = path;
-		result.errors.push_back(error);
+		result.errors.push_back(text.message());
 		return result;
 	}
 	std::error_code ec;
 	fs::path dir = fs::absolute(fs::path(path), ec).parent_path();
 	if (ec)
 		dir = fs::path(path).parent_path();
-	ConfigResult result = parseWithSource(text, dir.string(), path);
+	ConfigResult result = parseWithSource(text.value(), dir.string(), path);
 	result.config.path = path;
 	return result;
 }

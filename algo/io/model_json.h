@@ -23,7 +23,7 @@
  *   "date" (not used).
  *
  * Unknown keys are ignored. Nothing here throws: every failure comes back as
- * an error sentence that names the file (or "<text>") and the problem.
+ * a Result whose message names the file (or "<text>") and the problem.
  *
  * Host and start-up only. Allocates: yes (strings, the parsed document).
  */
@@ -32,41 +32,32 @@
 #include <string>
 
 #include "algo/camera_model.h"
+#include "algo/status.h"
 #include "algo/target_model.h"
 
 namespace dockpose {
-
-/* A value or the reason there is none. */
-template<typename T>
-struct LoadResult {
-	T value{};
-	std::string error; /* empty on success */
-
-	bool ok() const { return error.empty(); }
-	explicit operator bool() const { return ok(); }
-};
 
 /*
  * Parse a target model from JSON text. `source` names the text in error
  * messages (a path, or "<text>"); it also gives the default name.
  */
-LoadResult<TargetModel> parseTargetModel(const std::string &json_text,
-					 const std::string &source = "<text>");
+Result<TargetModel> parseTargetModel(const std::string &json_text,
+				     const std::string &source = "<text>");
 
 /* Read and parse a target model file. */
-LoadResult<TargetModel> loadTargetModel(const std::string &path);
+Result<TargetModel> loadTargetModel(const std::string &path);
 
 /* Parse camera intrinsics from JSON text; `source` as above. */
-LoadResult<CameraIntrinsics> parseCameraIntrinsics(const std::string &json_text,
-						   const std::string &source = "<text>");
+Result<CameraIntrinsics> parseCameraIntrinsics(const std::string &json_text,
+					       const std::string &source = "<text>");
 
 /* Read and parse a camera file. */
-LoadResult<CameraIntrinsics> loadCameraIntrinsics(const std::string &path);
+Result<CameraIntrinsics> loadCameraIntrinsics(const std::string &path);
 
 /*
- * Read a whole file into *contents. Returns an empty string on success, else
- * "<path>: <reason>". Used by the loaders above and by the PGM reader.
+ * Read a whole file. Errors say "<path>: <reason>". Used by the loaders above
+ * and by the board file reader.
  */
-std::string readFileContents(const std::string &path, std::string *contents);
+Result<std::string> readFileContents(const std::string &path);
 
 } /* namespace dockpose */

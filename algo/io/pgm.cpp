@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <utility>
 
 #include "algo/capacities.h"
 
@@ -42,17 +43,17 @@ std::size_t skipSpaceAndComments(std::string_view s, std::size_t pos)
 }
 
 /*
- * Read one unsigned decimal header field. Returns an empty string or the
- * reason it failed. Values are capped while reading so absurd sizes cannot
+ * Read one unsigned decimal header field; an error gives the reason it failed. Values are capped while reading so absurd sizes cannot
  * overflow.
  */
-std::string readField(std::string_view s, std::size_t *pos, const char *what, long *value)
+Status readField(std::string_view s, std::size_t *pos, const char *what, long *value)
 {
 	*pos = skipSpaceAndComments(s, *pos);
 	if (*pos >= s.size())
-		return std::string("the header ends before its ") + what;
+		return Status::error(std::string("the header ends before its ") + what);
 	if (s[*pos] < '0' || s[*pos] > '9')
-		return std::string("the header's ") + what + " is not a decimal number";
+		return Status::error(std::string("the header's ") + what +
+				     " is not a decimal number");
 	long v = 0;
 	while (*pos < s.size() && s[*pos] >= '0' && s[*pos] <= '9') {
 		if (v < 100000000)
@@ -60,85 +61,90 @@ std::string readField(std::string_view s, std::size_t *pos, const char *what, lo
 		++*pos;
 	}
 	if (*pos < s.size() && !isSpace(s[*pos]) && s[*pos] != '#')
-		return std::string("the header's ") + what + " is followed by '" + s[*pos] +
-		       "' instead of whitespace";
+		return Status::error(std::string("the header's ") + what + " is followed by '" +
+				     s[*pos] + "' instead of whitespace");
 	*value = v;
-	return {};
+	return Status::ok();
 }
 
 } /* namespace */
 
-std::string viewPgm(std::string_view bytes, const std::string &source, ImageView *view)
+Status viewPgm(std::string_view bytes, const std::string &source, ImageView *view)
 {
 	if (bytes.size() < 2 || bytes[0] != 'P')
-		return source + ": not a PGM file (it does not start with \"P5\")";
+		return Status::error(source + ": not a PGM file (it does not start with \"P5\")");
 	if (bytes[1] == '2')
-		return source + ": ASCII PGM (P2) is not supported; convert it to binary P5";
+		return Status::error(source +
+				     ": ASCII PGM (P2) is not supported; convert it to binary P5");
 	if (bytes[1] != '5')
-		return source + ": Netpbm type P" + bytes[1] +
-		       " is not a binary graymap; dockpose reads P5 only";
+		return Status::error(source + ": Netpbm type P" + bytes[1] +
+				     " is not a binary graymap; dockpose reads P5 only");
 	std::size_t pos = 2;
 	if (pos < bytes.size() && !isSpace(bytes[pos]) && bytes[pos] != '#')
-		return source + ": malformed PGM header (no whitespace after \"P5\")";
+		return Status::error(source +
+				     ": malformed PGM header (no whitespace after \"P5\")");
 
 	long width = 0, height = 0, maxval = 0;
-	std::string err;
-	if (!(err = readField(bytes, &pos, "width", &width)).empty() ||
-	    !(err = readField(bytes, &pos, "height", &height)).empty() ||
-	    !(err = readField(bytes, &pos, "maxval", &maxval)).empty())
-		return source + ": malformed PGM header: " + err;
+	for (auto [what, value] : { std::pair{ "width", &width }, std::pair{ "height", &height },
+				    std::pair{ "maxval", &maxval } })
+		if (Status s = readField(bytes, &pos, what, value); !s)
+			return Status::error(source + ": malformed PGM header: " + s.message());
 	if (width <= 0 || height <= 0 || width > kMaxFrameSide || height > kMaxFrameSide)
-		return source + ": PGM size " + std::to_string(width) + "x" +
-		       std::to_string(height) + " is not a frame size (1.." +
-		       std::to_string(kMaxFrameSide) + " pixels per side)";
+		return Status::error(source + ": PGM size " + std::to_string(width) + "x" +
+				     std::to_string(height) + " is not a frame size (1.." +
+				     std::to_string(kMaxFrameSide) + " pixels per side)");
 	if (maxval > 255)
-		return source + ": 16-bit PGM (maxval " + std::to_string(maxval) +
-		       ") is not supported; dockpose needs 8-bit frames";
+		return Status::error(source + ": 16-bit PGM (maxval " + std::to_string(maxval) +
+				     ") is not supported; dockpose needs 8-bit frames");
 	if (maxval < 1)
-		return source + ": PGM maxval 0 is invalid (1..255 expected)";
+		return Status::error(source + ": PGM maxval 0 is invalid (1..255 expected)");
 	/* Exactly one whitespace byte separates the header from the pixels. */
 	if (pos >= bytes.size() || !isSpace(bytes[pos]))
-		return source + ": truncated PGM (no pixel data after the header)";
+		return Status::error(source + ": truncated PGM (no pixel data after the header)");
 	++pos;
 
 	const std::size_t need = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
 	const std::size_t have = bytes.size() - pos;
 	if (have < need)
-		return source + ": truncated PGM: " + std::to_string(width) + "x" +
-		       std::to_string(height) + " needs " + std::to_string(need) +
-		       " bytes of pixel data, the file has " + std::to_string(have);
+		return Status::error(source + ": truncated PGM: " + std::to_string(width) + "x" +
+				     std::to_string(height) + " needs " + std::to_string(need) +
+				     " bytes of pixel data, the file has " + std::to_string(have));
 	view->data = reinterpret_cast<const std::uint8_t *>(bytes.data() + pos);
 	view->width = static_cast<int>(width);
 	view->height = static_cast<int>(height);
 	view->stride_bytes = static_cast<int>(width);
-	return {};
+	return Status::ok();
 }
 
-LoadResult<Image> parsePgm(std::string_view bytes, const std::string &source)
+namespace {
+
+Image copyOf(const ImageView &view)
 {
-	LoadResult<Image> r;
-	ImageView view;
-	r.error = viewPgm(bytes, source, &view);
-	if (!r.ok())
-		return r;
-	r.value = Image(view.width, view.height);
-	std::memcpy(r.value.data(), view.data,
-		    static_cast<std::size_t>(view.width) * static_cast<std::size_t>(view.height));
-	return r;
+	Image image(view.width, view.height);
+	if (view.data != nullptr) /* always, after a successful viewPgm() or read() */
+		std::memcpy(image.data(), view.data,
+			    static_cast<std::size_t>(view.width) *
+				    static_cast<std::size_t>(view.height));
+	return image;
 }
 
-LoadResult<Image> readPgm(const std::string &path)
+} /* namespace */
+
+Result<Image> parsePgm(std::string_view bytes, const std::string &source)
+{
+	ImageView view;
+	if (Status s = viewPgm(bytes, source, &view); !s)
+		return s;
+	return copyOf(view);
+}
+
+Result<Image> readPgm(const std::string &path)
 {
 	PgmReader reader;
-	LoadResult<Image> r;
 	ImageView view;
-	r.error = reader.read(path, &view);
-	if (!r.ok())
-		return r;
-	r.value = Image(view.width, view.height);
-	std::memcpy(r.value.data(), view.data,
-		    static_cast<std::size_t>(view.width) * static_cast<std::size_t>(view.height));
-	return r;
+	if (Status s = reader.read(path, &view); !s)
+		return s;
+	return copyOf(view);
 }
 
 PgmReader::PgmReader(int width, int height)
@@ -155,22 +161,22 @@ void PgmReader::grow(std::size_t bytes)
 	capacity_ = bytes;
 }
 
-std::string PgmReader::read(const std::string &path, ImageView *view)
+Status PgmReader::read(const std::string &path, ImageView *view)
 {
 	const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
 	if (fd < 0) {
 		const int err = errno;
-		return path + ": cannot open (" + (err ? std::strerror(err) : "unknown error") +
-		       ")";
+		return Status::error(path + ": cannot open (" +
+				     (err ? std::strerror(err) : "unknown error") + ")");
 	}
 	struct stat st;
 	if (::fstat(fd, &st) != 0) {
 		::close(fd);
-		return path + ": read error";
+		return Status::error(path + ": read error");
 	}
 	if (S_ISDIR(st.st_mode)) {
 		::close(fd);
-		return path + ": is a directory, not a file";
+		return Status::error(path + ": is a directory, not a file");
 	}
 
 	/*
@@ -196,7 +202,7 @@ std::string PgmReader::read(const std::string &path, ImageView *view)
 			continue;
 		if (n < 0) {
 			::close(fd);
-			return path + ": read error";
+			return Status::error(path + ": read error");
 		}
 		if (n == 0)
 			break;
@@ -221,22 +227,22 @@ std::string encodePgm(const ImageView &image)
 	return out;
 }
 
-std::string writePgm(const std::string &path, const ImageView &image)
+Status writePgm(const std::string &path, const ImageView &image)
 {
 	if (!image.valid())
-		return path + ": cannot write an empty or invalid image";
+		return Status::error(path + ": cannot write an empty or invalid image");
 	const std::string bytes = encodePgm(image);
 	std::ofstream out(path, std::ios::binary | std::ios::trunc);
 	if (!out) {
 		const int err = errno;
-		return path + ": cannot create (" + (err ? std::strerror(err) : "unknown error") +
-		       ")";
+		return Status::error(path + ": cannot create (" +
+				     (err ? std::strerror(err) : "unknown error") + ")");
 	}
 	out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 	out.close();
 	if (!out)
-		return path + ": write failed";
-	return {};
+		return Status::error(path + ": write failed");
+	return Status::ok();
 }
 
 } /* namespace dockpose */

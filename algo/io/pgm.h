@@ -25,29 +25,29 @@
 #include <string_view>
 
 #include "algo/image.h"
-#include "algo/io/model_json.h"
+#include "algo/status.h"
 
 namespace dockpose {
 
 /*
  * Check a PGM held in memory and show its pixels where they are: on success
  * *view points into `bytes` (stride = width) and stays valid as long as they
- * do. `source` names the bytes in error messages. Returns an empty string or
- * "<source>: <reason>". Allocates: only the error message.
+ * do. `source` names the bytes in error messages ("<source>: <reason>").
+ * Allocates: only the error message.
  */
-std::string viewPgm(std::string_view bytes, const std::string &source, ImageView *view);
+Status viewPgm(std::string_view bytes, const std::string &source, ImageView *view);
 
 /* Decode a PGM held in memory; `source` names it in error messages. */
-LoadResult<Image> parsePgm(std::string_view bytes, const std::string &source = "<bytes>");
+Result<Image> parsePgm(std::string_view bytes, const std::string &source = "<bytes>");
 
 /* Read a PGM file. */
-LoadResult<Image> readPgm(const std::string &path);
+Result<Image> readPgm(const std::string &path);
 
 /* Encode a frame as binary PGM (P5, maxval 255). */
 std::string encodePgm(const ImageView &image);
 
-/* Write a frame to a P5 file. Returns an empty string, or "<path>: <reason>". */
-std::string writePgm(const std::string &path, const ImageView &image);
+/* Write a frame to a P5 file. Errors say "<path>: <reason>". */
+Status writePgm(const std::string &path, const ImageView &image);
 
 /*
  * Reads PGM files one after another into one buffer it owns: open(2),
@@ -67,11 +67,11 @@ public:
 	PgmReader(int width, int height);
 
 	/*
-	 * Read the PGM file at `path`. Returns an empty string and sets *view, or
-	 * "<path>: <reason>": the messages of readPgm() ("cannot open (...)", "is a
+	 * Read the PGM file at `path` and set *view, or an error "<path>: <reason>":
+	 * the messages of readPgm() ("cannot open (...)", "is a
 	 * directory, not a file", "read error", and those of viewPgm()).
 	 */
-	std::string read(const std::string &path, ImageView *view);
+	Status read(const std::string &path, ImageView *view);
 
 	/* Bytes the buffer holds without growing. */
 	std::size_t capacity() const { return capacity_; }

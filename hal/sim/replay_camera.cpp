@@ -60,17 +60,17 @@ Status ReplayCamera::configure(const CameraConfig &config)
 	std::vector<Image> frames;
 	frames.reserve(paths.size());
 	for (const std::string &path : paths) {
-		LoadResult<Image> pgm = readPgm(path);
+		Result<Image> pgm = readPgm(path);
 		if (!pgm)
-			return fail(name() + ": " + pgm.error);
-		if (!frames.empty() && (pgm.value.width() != frames[0].width() ||
-					pgm.value.height() != frames[0].height()))
+			return fail(name() + ": " + pgm.message());
+		if (!frames.empty() &&
+		    (pgm->width() != frames[0].width() || pgm->height() != frames[0].height()))
 			return fail(name() + ": " + path + ": size " +
-				    std::to_string(pgm.value.width()) + "x" +
-				    std::to_string(pgm.value.height()) + " differs from " +
-				    paths[0] + "'s " + std::to_string(frames[0].width()) + "x" +
+				    std::to_string(pgm->width()) + "x" +
+				    std::to_string(pgm->height()) + " differs from " + paths[0] +
+				    "'s " + std::to_string(frames[0].width()) + "x" +
 				    std::to_string(frames[0].height()));
-		frames.push_back(std::move(pgm.value));
+		frames.push_back(std::move(pgm).value());
 	}
 	const int width = frames[0].width(), height = frames[0].height();
 	if ((config.width != 0 && config.width != width) ||
@@ -79,8 +79,7 @@ Status ReplayCamera::configure(const CameraConfig &config)
 			    std::to_string(config.height) + " does not match the frames' " +
 			    std::to_string(width) + "x" + std::to_string(height) +
 			    " (use 0x0 or the frames' size)");
-	const Status status = setup(config, width, height);
-	if (!status)
+	if (Status status = setup(config, width, height); !status)
 		return status;
 	frames_ = std::move(frames);
 	return Status::ok();

@@ -36,9 +36,8 @@ std::string SyntheticCamera::name() const
 
 Status SyntheticCamera::configure(const CameraConfig &config)
 {
-	const std::string bad_intrinsics = intrinsics_.validate();
-	if (!bad_intrinsics.empty())
-		return fail(name() + ": bad intrinsics: " + bad_intrinsics);
+	if (Status bad = intrinsics_.validate(); !bad)
+		return fail(name() + ": bad intrinsics: " + bad.message());
 	if (target_.points_mm.empty())
 		return fail(name() + ": the target model has no LEDs");
 	if ((config.width != 0 && config.width != intrinsics_.width) ||

@@ -40,7 +40,7 @@ class CameraModelTest : public ::testing::TestWithParam<CameraIntrinsics>
 
 TEST_P(CameraModelTest, IntrinsicsAreValid)
 {
-	EXPECT_EQ(GetParam().validate(), "");
+	EXPECT_EQ(GetParam().validate().message(), "");
 }
 
 TEST_P(CameraModelTest, DistortMatchesTheFormula)
@@ -192,11 +192,11 @@ TEST(CameraModel, ValidateNamesBadValues)
 {
 	CameraIntrinsics k = distortedCamera();
 	k.fx = -1.0;
-	EXPECT_NE(k.validate(), "");
+	EXPECT_NE(k.validate().message(), "");
 	k = distortedCamera();
 	k.width = 0;
-	EXPECT_NE(k.validate(), "");
+	EXPECT_NE(k.validate().message(), "");
 	k = distortedCamera();
 	k.k1 = std::nan("");
-	EXPECT_NE(k.validate(), "");
+	EXPECT_NE(k.validate().message(), "");
 }

@@ -45,9 +45,9 @@ Count falsePoses(const char *target_file, const char *camera_file, Scenario scen
 {
 	const auto target = loadTargetModel(test::dataPath(target_file));
 	const auto camera = loadCameraIntrinsics(test::dataPath(camera_file));
-	EXPECT_TRUE(target.ok() && camera.ok()) << target_file << ", " << camera_file;
+	EXPECT_TRUE(target.isOk() && camera.isOk()) << target_file << ", " << camera_file;
 	Count run;
-	if (!target.ok() || !camera.ok())
+	if (!target.isOk() || !camera.isOk())
 		return run;
 	PipelineConfig pipeline;
 	pipeline.correspondence.max_log10_nfa = max_log10_nfa;
@@ -59,7 +59,7 @@ Count falsePoses(const char *target_file, const char *camera_file, Scenario scen
 	e.seed = seed;
 	e.any_side = any_side;
 	e.fast_noise = true;
-	const EvaluationTally t = evaluate(target.value, camera.value, pipeline, e);
+	const EvaluationTally t = evaluate(target.value(), camera.value(), pipeline, e);
 	const ScenarioTally &st = t.scenarios[static_cast<int>(scenario)];
 	EXPECT_EQ(st.frames, frames);
 	EXPECT_EQ(st.target_free, frames) << "every frame is without a true pose";

@@ -43,8 +43,8 @@ void writeFile(const std::string &path, const std::string &bytes)
 TEST(ModelJson, WedgeIsTheMethodExample)
 {
 	const auto r = loadTargetModel(kData + "/wedge.json");
-	ASSERT_TRUE(r.ok()) << r.error;
-	const TargetModel &m = r.value;
+	ASSERT_TRUE(r.isOk()) << r.message();
+	const TargetModel &m = r.value();
 	EXPECT_EQ(m.name, "wedge");
 	const double expected[6][3] = { { -89, -38, 0 }, { -89, 38, 0 }, { 0, 38, -40 },
 					{ 0, -38, -40 }, { 89, -38, 0 }, { 89, 38, 0 } };
@@ -60,11 +60,11 @@ TEST(ModelJson, WedgeIsTheMethodExample)
 TEST(ModelJson, CornerIsThreeQuadsAroundABoxCornerFacingTheCamera)
 {
 	const auto r = loadTargetModel(kData + "/corner.json");
-	ASSERT_TRUE(r.ok()) << r.error;
-	const TargetModel &m = r.value;
+	ASSERT_TRUE(r.isOk()) << r.message();
+	const TargetModel &m = r.value();
 	ASSERT_EQ(m.points_mm.size(), 7u);
 	ASSERT_EQ(m.faces.size(), 3u);
-	EXPECT_TRUE(m.validate().empty());
+	EXPECT_TRUE(m.validate().message().empty());
 	EXPECT_GT(m.diameterMm(), 130.0);
 	EXPECT_LT(m.diameterMm(), 170.0);
 
@@ -105,27 +105,27 @@ TEST(ModelJson, CornerIsThreeQuadsAroundABoxCornerFacingTheCamera)
 TEST(ModelJson, Cameras)
 {
 	const auto a = loadCameraIntrinsics(kData + "/cam1456.json");
-	ASSERT_TRUE(a.ok()) << a.error;
-	EXPECT_EQ(a.value.width, 1456);
-	EXPECT_EQ(a.value.height, 1088);
-	EXPECT_EQ(a.value.fx, 1739.0);
-	EXPECT_EQ(a.value.fy, 1739.0);
-	EXPECT_EQ(a.value.cx, 727.5);
-	EXPECT_EQ(a.value.cy, 543.5);
-	EXPECT_EQ(a.value.k1, -0.12);
-	EXPECT_EQ(a.value.k2, 0.03);
-	EXPECT_EQ(a.value.p1, 0.0005);
-	EXPECT_EQ(a.value.p2, -0.0003);
+	ASSERT_TRUE(a.isOk()) << a.message();
+	EXPECT_EQ(a.value().width, 1456);
+	EXPECT_EQ(a.value().height, 1088);
+	EXPECT_EQ(a.value().fx, 1739.0);
+	EXPECT_EQ(a.value().fy, 1739.0);
+	EXPECT_EQ(a.value().cx, 727.5);
+	EXPECT_EQ(a.value().cy, 543.5);
+	EXPECT_EQ(a.value().k1, -0.12);
+	EXPECT_EQ(a.value().k2, 0.03);
+	EXPECT_EQ(a.value().p1, 0.0005);
+	EXPECT_EQ(a.value().p2, -0.0003);
 
 	const auto b = loadCameraIntrinsics(kData + "/cam512.json");
-	ASSERT_TRUE(b.ok()) << b.error;
-	EXPECT_EQ(b.value.width, 512);
-	EXPECT_EQ(b.value.height, 512);
-	EXPECT_EQ(b.value.fx, 400.0);
-	EXPECT_EQ(b.value.cx, 255.5);
-	EXPECT_EQ(b.value.cy, 255.5);
-	EXPECT_EQ(b.value.k1, 0.0);
-	EXPECT_EQ(b.value.p2, 0.0);
+	ASSERT_TRUE(b.isOk()) << b.message();
+	EXPECT_EQ(b.value().width, 512);
+	EXPECT_EQ(b.value().height, 512);
+	EXPECT_EQ(b.value().fx, 400.0);
+	EXPECT_EQ(b.value().cx, 255.5);
+	EXPECT_EQ(b.value().cy, 255.5);
+	EXPECT_EQ(b.value().k1, 0.0);
+	EXPECT_EQ(b.value().p2, 0.0);
 }
 
 TEST(ModelJson, DefaultsNameAndDistortion)
@@ -133,17 +133,17 @@ TEST(ModelJson, DefaultsNameAndDistortion)
 	const auto t = parseTargetModel(
 		R"({"points": [[0,0,0],[10,0,0],[10,10,0],[0,10,0]], "faces": [[0,1,2,3]]})",
 		"/some/dir/board.json");
-	ASSERT_TRUE(t.ok()) << t.error;
-	EXPECT_EQ(t.value.name, "board");
+	ASSERT_TRUE(t.isOk()) << t.message();
+	EXPECT_EQ(t.value().name, "board");
 	const auto c = parseCameraIntrinsics(
 		R"({"width": 640, "height": 480, "fx": 500, "fy": 501, "cx": 319.5,
 		"cy": 239.5, "k3": 0.0})");
-	ASSERT_TRUE(c.ok()) << c.error;
-	EXPECT_EQ(c.value.fy, 501.0);
-	EXPECT_EQ(c.value.k1, 0.0);
-	EXPECT_EQ(c.value.k2, 0.0);
-	EXPECT_EQ(c.value.p1, 0.0);
-	EXPECT_EQ(c.value.p2, 0.0);
+	ASSERT_TRUE(c.isOk()) << c.message();
+	EXPECT_EQ(c.value().fy, 501.0);
+	EXPECT_EQ(c.value().k1, 0.0);
+	EXPECT_EQ(c.value().k2, 0.0);
+	EXPECT_EQ(c.value().p1, 0.0);
+	EXPECT_EQ(c.value().p2, 0.0);
 }
 
 namespace {
@@ -226,10 +226,11 @@ TEST(ModelJson, BadTargetsGiveTheirOwnError)
 	};
 	for (const BadCase &c : cases) {
 		const auto r = parseTargetModel(c.text, "bad.json");
-		EXPECT_FALSE(r.ok()) << c.what;
-		EXPECT_EQ(r.error.rfind("bad.json: ", 0), 0u) << c.what << ": " << r.error;
-		EXPECT_NE(r.error.find(c.expected), std::string::npos)
-			<< c.what << ": expected \"" << c.expected << "\" in \"" << r.error << "\"";
+		EXPECT_FALSE(r.isOk()) << c.what;
+		EXPECT_EQ(r.message().rfind("bad.json: ", 0), 0u) << c.what << ": " << r.message();
+		EXPECT_NE(r.message().find(c.expected), std::string::npos)
+			<< c.what << ": expected \"" << c.expected << "\" in \"" << r.message()
+			<< "\"";
 	}
 }
 
@@ -272,10 +273,11 @@ TEST(ModelJson, BadCamerasGiveTheirOwnError)
 	};
 	for (const BadCase &c : cases) {
 		const auto r = parseCameraIntrinsics(c.text, "cam.json");
-		EXPECT_FALSE(r.ok()) << c.what;
-		EXPECT_EQ(r.error.rfind("cam.json: ", 0), 0u) << c.what << ": " << r.error;
-		EXPECT_NE(r.error.find(c.expected), std::string::npos)
-			<< c.what << ": expected \"" << c.expected << "\" in \"" << r.error << "\"";
+		EXPECT_FALSE(r.isOk()) << c.what;
+		EXPECT_EQ(r.message().rfind("cam.json: ", 0), 0u) << c.what << ": " << r.message();
+		EXPECT_NE(r.message().find(c.expected), std::string::npos)
+			<< c.what << ": expected \"" << c.expected << "\" in \"" << r.message()
+			<< "\"";
 	}
 }
 
@@ -283,11 +285,11 @@ TEST(ModelJson, MissingFileNamesThePath)
 {
 	const std::string path = kData + "/no_such_target.json";
 	const auto t = loadTargetModel(path);
-	EXPECT_FALSE(t.ok());
-	EXPECT_EQ(t.error.rfind(path + ": cannot open", 0), 0u) << t.error;
+	EXPECT_FALSE(t.isOk());
+	EXPECT_EQ(t.message().rfind(path + ": cannot open", 0), 0u) << t.message();
 	const auto c = loadCameraIntrinsics(kData);
-	EXPECT_FALSE(c.ok());
-	EXPECT_NE(c.error.find("is a directory"), std::string::npos) << c.error;
+	EXPECT_FALSE(c.isOk());
+	EXPECT_NE(c.message().find("is a directory"), std::string::npos) << c.message();
 }
 
 TEST(Pgm, HandMadeFileWithCommentsAndOddWhitespace)
@@ -300,15 +302,15 @@ TEST(Pgm, HandMadeFileWithCommentsAndOddWhitespace)
 	bytes.append(reinterpret_cast<const char *>(pixels), 6);
 	bytes += "trailing bytes of a second image are ignored";
 	const auto r = parsePgm(bytes, "x.pgm");
-	ASSERT_TRUE(r.ok()) << r.error;
-	ASSERT_EQ(r.value.width(), 3);
-	ASSERT_EQ(r.value.height(), 2);
-	EXPECT_EQ(r.value.at(0, 0), 0);
-	EXPECT_EQ(r.value.at(1, 0), 10);
-	EXPECT_EQ(r.value.at(2, 0), 200);
-	EXPECT_EQ(r.value.at(0, 1), 7);
-	EXPECT_EQ(r.value.at(1, 1), 13);
-	EXPECT_EQ(r.value.at(2, 1), 255); /* values are not rescaled or clipped to maxval */
+	ASSERT_TRUE(r.isOk()) << r.message();
+	ASSERT_EQ(r.value().width(), 3);
+	ASSERT_EQ(r.value().height(), 2);
+	EXPECT_EQ(r.value().at(0, 0), 0);
+	EXPECT_EQ(r.value().at(1, 0), 10);
+	EXPECT_EQ(r.value().at(2, 0), 200);
+	EXPECT_EQ(r.value().at(0, 1), 7);
+	EXPECT_EQ(r.value().at(1, 1), 13);
+	EXPECT_EQ(r.value().at(2, 1), 255); /* values are not rescaled or clipped to maxval */
 }
 
 TEST(Pgm, WriteReadRoundTrip)
@@ -318,7 +320,7 @@ TEST(Pgm, WriteReadRoundTrip)
 		for (int x = 0; x < img.width(); ++x)
 			img.at(x, y) = static_cast<std::uint8_t>((x * 31 + y * 17 + x * y) & 0xff);
 	const std::string path = tempPath("roundtrip.pgm");
-	ASSERT_EQ(writePgm(path, img.view()), "");
+	ASSERT_EQ(writePgm(path, img.view()).message(), "");
 
 	/* The header is exactly the canonical one. */
 	std::ifstream in(path, std::ios::binary);
@@ -327,12 +329,12 @@ TEST(Pgm, WriteReadRoundTrip)
 	EXPECT_EQ(head, "P5\n37 23\n255");
 
 	const auto r = readPgm(path);
-	ASSERT_TRUE(r.ok()) << r.error;
-	ASSERT_EQ(r.value.width(), 37);
-	ASSERT_EQ(r.value.height(), 23);
+	ASSERT_TRUE(r.isOk()) << r.message();
+	ASSERT_EQ(r.value().width(), 37);
+	ASSERT_EQ(r.value().height(), 23);
 	for (int y = 0; y < img.height(); ++y)
 		for (int x = 0; x < img.width(); ++x)
-			ASSERT_EQ(r.value.at(x, y), img.at(x, y)) << x << "," << y;
+			ASSERT_EQ(r.value().at(x, y), img.at(x, y)) << x << "," << y;
 	std::filesystem::remove(path);
 
 	/* A strided view is written row by row. */
@@ -342,10 +344,10 @@ TEST(Pgm, WriteReadRoundTrip)
 			strided[y * 4 + x] = static_cast<std::uint8_t>(10 * y + x);
 	const ImageView view{ strided.data(), 2, 3, 4 };
 	const auto s = parsePgm(encodePgm(view));
-	ASSERT_TRUE(s.ok()) << s.error;
+	ASSERT_TRUE(s.isOk()) << s.message();
 	for (int y = 0; y < 3; ++y)
 		for (int x = 0; x < 2; ++x)
-			EXPECT_EQ(s.value.at(x, y), 10 * y + x);
+			EXPECT_EQ(s.value().at(x, y), 10 * y + x);
 }
 
 TEST(Pgm, BadFilesGiveTheirOwnError)
@@ -376,31 +378,35 @@ TEST(Pgm, BadFilesGiveTheirOwnError)
 	};
 	for (const BadCase &c : cases) {
 		const auto r = parsePgm(c.text, "f.pgm");
-		EXPECT_FALSE(r.ok()) << c.what;
-		EXPECT_EQ(r.error.rfind("f.pgm: ", 0), 0u) << c.what << ": " << r.error;
-		EXPECT_NE(r.error.find(c.expected), std::string::npos)
-			<< c.what << ": expected \"" << c.expected << "\" in \"" << r.error << "\"";
+		EXPECT_FALSE(r.isOk()) << c.what;
+		EXPECT_EQ(r.message().rfind("f.pgm: ", 0), 0u) << c.what << ": " << r.message();
+		EXPECT_NE(r.message().find(c.expected), std::string::npos)
+			<< c.what << ": expected \"" << c.expected << "\" in \"" << r.message()
+			<< "\"";
 	}
 }
 
 TEST(Pgm, FileErrors)
 {
 	const auto missing = readPgm("/nonexistent/dir/frame.pgm");
-	EXPECT_FALSE(missing.ok());
-	EXPECT_EQ(missing.error.rfind("/nonexistent/dir/frame.pgm: cannot open", 0), 0u)
-		<< missing.error;
+	EXPECT_FALSE(missing.isOk());
+	EXPECT_EQ(missing.message().rfind("/nonexistent/dir/frame.pgm: cannot open", 0), 0u)
+		<< missing.message();
 
 	const std::string path = tempPath("truncated.pgm");
 	writeFile(path, "P5\n8 8\n255\n" + std::string(63, '\x01'));
 	const auto t = readPgm(path);
-	EXPECT_FALSE(t.ok());
-	EXPECT_NE(t.error.find(path + ": truncated PGM"), std::string::npos) << t.error;
+	EXPECT_FALSE(t.isOk());
+	EXPECT_NE(t.message().find(path + ": truncated PGM"), std::string::npos) << t.message();
 	std::filesystem::remove(path);
 
-	EXPECT_NE(writePgm("/nonexistent/dir/out.pgm", Image(2, 2).view()).find("cannot create"),
+	EXPECT_NE(writePgm("/nonexistent/dir/out.pgm", Image(2, 2).view())
+			  .message()
+			  .find("cannot create"),
 		  std::string::npos);
-	EXPECT_NE(writePgm(tempPath("empty.pgm"), Image().view()).find("empty or invalid"),
-		  std::string::npos);
+	EXPECT_NE(
+		writePgm(tempPath("empty.pgm"), Image().view()).message().find("empty or invalid"),
+		std::string::npos);
 }
 
 TEST(ModelJson, OptionalUncertaintyAndApproach)
@@ -410,26 +416,26 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 	const auto t = parseTargetModel(
 		"{" + square +
 		R"(, "led_sigma_mm": 0.2, "approach": {"axis": [0, 0, -2], "max_deg": 60}})");
-	ASSERT_TRUE(t.ok()) << t.error;
-	EXPECT_EQ(t.value.led_sigma_mm, 0.2);
-	EXPECT_TRUE(t.value.approach.set);
-	EXPECT_NEAR((t.value.approach.axis - Eigen::Vector3d(0, 0, -1)).norm(), 0.0, 1e-15);
-	EXPECT_EQ(t.value.approach.max_deg, 60.0);
+	ASSERT_TRUE(t.isOk()) << t.message();
+	EXPECT_EQ(t.value().led_sigma_mm, 0.2);
+	EXPECT_TRUE(t.value().approach.set);
+	EXPECT_NEAR((t.value().approach.axis - Eigen::Vector3d(0, 0, -1)).norm(), 0.0, 1e-15);
+	EXPECT_EQ(t.value().approach.max_deg, 60.0);
 	const auto plain = parseTargetModel("{" + square + "}");
-	ASSERT_TRUE(plain.ok()) << plain.error;
-	EXPECT_EQ(plain.value.led_sigma_mm, 0.0);
-	EXPECT_FALSE(plain.value.approach.set);
+	ASSERT_TRUE(plain.isOk()) << plain.message();
+	EXPECT_EQ(plain.value().led_sigma_mm, 0.0);
+	EXPECT_FALSE(plain.value().approach.set);
 
 	const auto c = parseCameraIntrinsics(
 		R"({"width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320, "cy": 240,
 		"sigma": {"fx": 0.8, "cy": 0.3, "k1": 0.001}, "rms_px": 0.21, "frames": 40, "date": "2024-06-01"})");
-	ASSERT_TRUE(c.ok()) << c.error;
-	EXPECT_EQ(c.value.sigma.fx, 0.8);
-	EXPECT_EQ(c.value.sigma.cy, 0.3);
-	EXPECT_EQ(c.value.sigma.k1, 0.001);
-	EXPECT_EQ(c.value.sigma.fy, 0.0);
-	EXPECT_TRUE(c.value.sigma.any());
-	EXPECT_FALSE(loadCameraIntrinsics(kData + "/cam512.json").value.sigma.any());
+	ASSERT_TRUE(c.isOk()) << c.message();
+	EXPECT_EQ(c.value().sigma.fx, 0.8);
+	EXPECT_EQ(c.value().sigma.cy, 0.3);
+	EXPECT_EQ(c.value().sigma.k1, 0.001);
+	EXPECT_EQ(c.value().sigma.fy, 0.0);
+	EXPECT_TRUE(c.value().sigma.any());
+	EXPECT_FALSE(loadCameraIntrinsics(kData + "/cam512.json").value().sigma.any());
 
 	const std::vector<BadCase> targets = {
 		{ "negative tolerance", "{" + square + R"(, "led_sigma_mm": -1})",
@@ -456,9 +462,10 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 	};
 	for (const BadCase &b : targets) {
 		const auto r = parseTargetModel(b.text, "bad.json");
-		EXPECT_FALSE(r.ok()) << b.what;
-		EXPECT_EQ(r.error.rfind("bad.json: ", 0), 0u) << b.what << ": " << r.error;
-		EXPECT_NE(r.error.find(b.expected), std::string::npos) << b.what << ": " << r.error;
+		EXPECT_FALSE(r.isOk()) << b.what;
+		EXPECT_EQ(r.message().rfind("bad.json: ", 0), 0u) << b.what << ": " << r.message();
+		EXPECT_NE(r.message().find(b.expected), std::string::npos)
+			<< b.what << ": " << r.message();
 	}
 	const std::string cam =
 		R"("width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320, "cy": 240)";
@@ -476,8 +483,9 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 	};
 	for (const BadCase &b : cameras) {
 		const auto r = parseCameraIntrinsics(b.text, "cam.json");
-		EXPECT_FALSE(r.ok()) << b.what;
-		EXPECT_EQ(r.error.rfind("cam.json: ", 0), 0u) << b.what << ": " << r.error;
-		EXPECT_NE(r.error.find(b.expected), std::string::npos) << b.what << ": " << r.error;
+		EXPECT_FALSE(r.isOk()) << b.what;
+		EXPECT_EQ(r.message().rfind("cam.json: ", 0), 0u) << b.what << ": " << r.message();
+		EXPECT_NE(r.message().find(b.expected), std::string::npos)
+			<< b.what << ": " << r.message();
 	}
 }

@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * PGM frames read in place (algo/io/pgm.h): viewPgm() shows the pixels where
+ * PGM frames read in place (algo/io/pgm.h): viewPgm().message() shows the pixels where
  * they are and refuses every bad file with parsePgm()'s own message;
  * PgmReader reads file after file into one buffer, with readPgm()'s messages,
  * from regular files and pipes, and allocates nothing once its buffer is big
@@ -112,7 +112,7 @@ TEST(PgmView, PixelsStayWhereTheyAre)
 	bytes += "trailing bytes";
 
 	ImageView view;
-	ASSERT_EQ(viewPgm(bytes, "x.pgm", &view), "");
+	ASSERT_EQ(viewPgm(bytes, "x.pgm", &view).message(), "");
 	EXPECT_EQ(view.data, reinterpret_cast<const std::uint8_t *>(bytes.data()) + offset);
 	EXPECT_EQ(view.width, 3);
 	EXPECT_EQ(view.height, 2);
@@ -126,9 +126,9 @@ TEST(PgmView, RefusesWhatParsePgmRefusesWithTheSameMessage)
 	for (const std::string &bytes : badFiles()) {
 		SCOPED_TRACE(bytes.substr(0, 24));
 		ImageView view;
-		const std::string err = viewPgm(bytes, "f.pgm", &view);
+		const std::string err = viewPgm(bytes, "f.pgm", &view).message();
 		EXPECT_EQ(err.rfind("f.pgm: ", 0), 0u) << err;
-		EXPECT_EQ(err, parsePgm(bytes, "f.pgm").error);
+		EXPECT_EQ(err, parsePgm(bytes, "f.pgm").message());
 		EXPECT_EQ(view.data, nullptr) << "a refused file leaves the view alone";
 	}
 }
@@ -142,13 +142,13 @@ TEST_F(PgmFiles, ReaderReadsFileAfterFileIntoOneBuffer)
 	for (int i = 0; i < 5; ++i) {
 		images.push_back(pattern(i == 3 ? 30 : 64, i == 3 ? 20 : 48, i));
 		paths.push_back((dir_ / ("f" + std::to_string(i) + ".pgm")).string());
-		ASSERT_EQ(writePgm(paths.back(), images.back().view()), "");
+		ASSERT_EQ(writePgm(paths.back(), images.back().view()).message(), "");
 	}
 	const std::uint8_t *first = nullptr;
 	for (std::size_t i = 0; i < paths.size(); ++i) {
 		SCOPED_TRACE(paths[i]);
 		ImageView view;
-		ASSERT_EQ(reader.read(paths[i], &view), "");
+		ASSERT_EQ(reader.read(paths[i], &view).message(), "");
 		expectSame(view, images[i]);
 		/* Every frame lands at the same place: one buffer, never copied again. */
 		if (!first)
@@ -156,8 +156,8 @@ TEST_F(PgmFiles, ReaderReadsFileAfterFileIntoOneBuffer)
 		EXPECT_EQ(view.data, first);
 		/* The same pixels as readPgm() gives. */
 		const auto copy = readPgm(paths[i]);
-		ASSERT_TRUE(copy.ok()) << copy.error;
-		expectSame(view, copy.value);
+		ASSERT_TRUE(copy.isOk()) << copy.message();
+		expectSame(view, copy.value());
 	}
 }
 
@@ -167,16 +167,16 @@ TEST_F(PgmFiles, ReaderGrowsForALargerFile)
 	const std::size_t before = reader.capacity();
 	const Image big = pattern(200, 150, 3);
 	const std::string path = (dir_ / "big.pgm").string();
-	ASSERT_EQ(writePgm(path, big.view()), "");
+	ASSERT_EQ(writePgm(path, big.view()).message(), "");
 	ImageView view;
-	ASSERT_EQ(reader.read(path, &view), "");
+	ASSERT_EQ(reader.read(path, &view).message(), "");
 	expectSame(view, big);
 	EXPECT_GT(reader.capacity(), before);
 
 	/* A default reader starts empty and still reads. */
 	PgmReader empty;
 	EXPECT_EQ(empty.capacity(), 0u);
-	ASSERT_EQ(empty.read(path, &view), "");
+	ASSERT_EQ(empty.read(path, &view).message(), "");
 	expectSame(view, big);
 }
 
@@ -185,18 +185,18 @@ TEST_F(PgmFiles, ReaderErrorsAreReadPgmsErrors)
 	PgmReader reader(4, 4);
 	ImageView view;
 	const std::string missing = (dir_ / "missing.pgm").string();
-	EXPECT_EQ(reader.read(missing, &view),
+	EXPECT_EQ(reader.read(missing, &view).message(),
 		  missing + ": cannot open (No such file or directory)");
-	EXPECT_EQ(readPgm(missing).error, reader.read(missing, &view));
+	EXPECT_EQ(readPgm(missing).message(), reader.read(missing, &view).message());
 
 	const std::string dir = dir_.string();
-	EXPECT_EQ(reader.read(dir, &view), dir + ": is a directory, not a file");
-	EXPECT_EQ(readPgm(dir).error, reader.read(dir, &view));
+	EXPECT_EQ(reader.read(dir, &view).message(), dir + ": is a directory, not a file");
+	EXPECT_EQ(readPgm(dir).message(), reader.read(dir, &view).message());
 
 	const std::string unreadable = write("unreadable.pgm", "P5\n1 1\n255\n\x01");
 	::chmod(unreadable.c_str(), 0);
 	if (::access(unreadable.c_str(), R_OK) != 0) { /* root reads anything */
-		EXPECT_EQ(reader.read(unreadable, &view),
+		EXPECT_EQ(reader.read(unreadable, &view).message(),
 			  unreadable + ": cannot open (Permission denied)");
 	}
 
@@ -204,17 +204,17 @@ TEST_F(PgmFiles, ReaderErrorsAreReadPgmsErrors)
 	for (const std::string &bytes : badFiles()) {
 		const std::string path = write("bad" + std::to_string(i++) + ".pgm", bytes);
 		SCOPED_TRACE(path);
-		const std::string err = reader.read(path, &view);
+		const std::string err = reader.read(path, &view).message();
 		EXPECT_EQ(err.rfind(path + ": ", 0), 0u) << err;
-		EXPECT_EQ(err, parsePgm(bytes, path).error);
-		EXPECT_EQ(err, readPgm(path).error);
+		EXPECT_EQ(err, parsePgm(bytes, path).message());
+		EXPECT_EQ(err, readPgm(path).message());
 	}
 
 	/* A bad file in between does not spoil the next good one. */
 	const Image img = pattern(4, 4, 9);
 	const std::string good = (dir_ / "good.pgm").string();
-	ASSERT_EQ(writePgm(good, img.view()), "");
-	ASSERT_EQ(reader.read(good, &view), "");
+	ASSERT_EQ(writePgm(good, img.view()).message(), "");
+	ASSERT_EQ(reader.read(good, &view).message(), "");
 	expectSame(view, img);
 }
 
@@ -237,7 +237,7 @@ TEST_F(PgmFiles, ReaderReadsAPipeToItsEnd)
 	});
 	PgmReader reader(10, 10);
 	ImageView view;
-	const std::string err = reader.read("/dev/fd/" + std::to_string(fds[0]), &view);
+	const std::string err = reader.read("/dev/fd/" + std::to_string(fds[0]), &view).message();
 	writer.join();
 	::close(fds[0]);
 	ASSERT_EQ(err, "");
@@ -251,14 +251,14 @@ TEST_F(PgmFiles, ReaderAllocatesNothingOnceItsBufferIsBigEnough)
 	std::vector<std::string> paths;
 	for (int i = 0; i < 4; ++i) {
 		paths.push_back((dir_ / ("n" + std::to_string(i) + ".pgm")).string());
-		ASSERT_EQ(writePgm(paths.back(), pattern(320, 240, i).view()), "");
+		ASSERT_EQ(writePgm(paths.back(), pattern(320, 240, i).view()).message(), "");
 	}
 	PgmReader reader(320, 240);
 	ImageView view;
 	std::uint64_t sum = 0;
 	dockpose::test::armAllocationCounter();
 	for (const std::string &path : paths) {
-		const std::string err = reader.read(path, &view);
+		const std::string err = reader.read(path, &view).message();
 		sum += err.empty() ? view.at(10, 10) : 1000;
 	}
 	const long allocations = dockpose::test::disarmAllocationCounter();
@@ -267,7 +267,7 @@ TEST_F(PgmFiles, ReaderAllocatesNothingOnceItsBufferIsBigEnough)
 
 	/* The hooks do count: readPgm() allocates its image. */
 	dockpose::test::armAllocationCounter();
-	const bool read = readPgm(paths[0]).ok();
+	const bool read = readPgm(paths[0]).isOk();
 	EXPECT_GT(dockpose::test::disarmAllocationCounter(), 0);
 	EXPECT_TRUE(read);
 }

@@ -60,8 +60,8 @@ TEST_P(EndToEnd, CorrectPosesAndNeverAWrongOne)
 	const E2eCase s = GetParam();
 	const auto target = loadTargetModel(dataPath(s.target));
 	const auto camera = loadCameraIntrinsics(dataPath(s.camera));
-	ASSERT_TRUE(target.ok()) << target.error;
-	ASSERT_TRUE(camera.ok()) << camera.error;
+	ASSERT_TRUE(target.isOk()) << target.message();
+	ASSERT_TRUE(camera.isOk()) << camera.message();
 	EvaluationConfig e;
 	e.frames = s.frames;
 	e.seed = 1234;
@@ -69,7 +69,7 @@ TEST_P(EndToEnd, CorrectPosesAndNeverAWrongOne)
 	e.max_range_mm = s.max_range_mm;
 	e.clutter = s.clutter;
 	const EvaluationTally t =
-		evaluate(target.value, camera.value, PipelineConfig{}, e,
+		evaluate(target.value(), camera.value(), PipelineConfig{}, e,
 			 [](const FrameOutcome &f, const Image &) {
 				 if (f.result->found && !f.correct)
 					 ADD_FAILURE() << "wrong pose reported as found: frame "
@@ -112,22 +112,22 @@ INSTANTIATE_TEST_SUITE_P(
 class EndToEndTracking : public ::testing::Test
 {
 protected:
-	void SetUp() override { ASSERT_TRUE(target.ok() && camera.ok()); }
+	void SetUp() override { ASSERT_TRUE(target.isOk() && camera.isOk()); }
 
-	const LoadResult<TargetModel> target = loadTargetModel(dataPath("wedge.json"));
-	const LoadResult<CameraIntrinsics> camera = loadCameraIntrinsics(dataPath("cam1456.json"));
+	const Result<TargetModel> target = loadTargetModel(dataPath("wedge.json"));
+	const Result<CameraIntrinsics> camera = loadCameraIntrinsics(dataPath("cam1456.json"));
 };
 
 TEST_F(EndToEndTracking, ApproachIsTrackedFrameToFrame)
 {
-	FrameRenderer renderer(target.value, camera.value);
-	Pipeline pipeline(target.value, camera.value);
+	FrameRenderer renderer(target.value(), camera.value());
+	Pipeline pipeline(target.value(), camera.value());
 	Image frame;
 	int tracked = 0, correct = 0;
 	const int n = 40;
 	for (int i = 0; i < n; ++i) {
 		const double range = 2000.0 - 40.0 * i;
-		const Pose truth = poseAt(camera.value, target.value, range,
+		const Pose truth = poseAt(camera.value(), target.value(), range,
 					  { 10.0 - 0.3 * i, -8.0 + 0.2 * i, 4.0 }, 0.45 + 0.002 * i,
 					  0.55 - 0.002 * i);
 		RenderOptions o;
@@ -151,11 +151,11 @@ TEST_F(EndToEndTracking, ApproachIsTrackedFrameToFrame)
  */
 TEST_F(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
 {
-	FrameRenderer renderer(target.value, camera.value);
+	FrameRenderer renderer(target.value(), camera.value());
 	PipelineConfig whole_config;
 	whole_config.full_frame_every = 1;
-	Pipeline windows(target.value, camera.value);
-	Pipeline whole(target.value, camera.value, whole_config);
+	Pipeline windows(target.value(), camera.value());
+	Pipeline whole(target.value(), camera.value(), whole_config);
 	const int every = PipelineConfig{}.full_frame_every;
 	Image frame;
 	int windowed = 0, found = 0, in_a_row = 0;
@@ -165,7 +165,7 @@ TEST_F(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
 		const double range = 1600.0 - 8.0 * i;
 		/* At the jump the target leaps sideways by a fifth of the frame: far beyond every window. */
 		const double u_frac = 0.4 + 0.001 * i + (i >= jump ? 0.2 : 0.0);
-		const Pose truth = poseAt(camera.value, target.value, range,
+		const Pose truth = poseAt(camera.value(), target.value(), range,
 					  { 10.0 - 0.2 * i, -8.0 + 0.15 * i, 4.0 }, u_frac, 0.55);
 		RenderOptions o;
 		o.reflections = 4;
@@ -211,8 +211,8 @@ TEST_F(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
 /* After readWhole(n) the next n frames are read whole, then windows again. */
 TEST_F(EndToEndTracking, ReadWholeAfterALightChange)
 {
-	FrameRenderer renderer(target.value, camera.value);
-	Pipeline pipeline(target.value, camera.value);
+	FrameRenderer renderer(target.value(), camera.value());
+	Pipeline pipeline(target.value(), camera.value());
 	Image frame;
 	std::vector<int> windows;
 	for (int i = 0; i < 12; ++i) {
@@ -220,7 +220,7 @@ TEST_F(EndToEndTracking, ReadWholeAfterALightChange)
 			pipeline.readWhole(3);
 		RenderOptions o;
 		o.clutter_seed = 3;
-		renderer.render(poseAt(camera.value, target.value, 900.0 - 2.0 * i,
+		renderer.render(poseAt(camera.value(), target.value(), 900.0 - 2.0 * i,
 				       { 5.0, -4.0, 2.0 }, 0.5, 0.5),
 				o, 40 + i, &frame);
 		const PoseResult &r = pipeline.process(frame.view());
@@ -239,12 +239,12 @@ TEST(EndToEndFailures, EmptyAndWrongSizedFramesGiveNoPose)
 {
 	const auto target = loadTargetModel(dataPath("wedge.json"));
 	const auto camera = loadCameraIntrinsics(dataPath("cam512.json"));
-	ASSERT_TRUE(target.ok() && camera.ok());
-	Pipeline pipeline(target.value, camera.value);
-	Image black(camera.value.width, camera.value.height, 0);
+	ASSERT_TRUE(target.isOk() && camera.isOk());
+	Pipeline pipeline(target.value(), camera.value());
+	Image black(camera.value().width, camera.value().height, 0);
 	EXPECT_FALSE(pipeline.process(black.view()).found);
 	EXPECT_EQ(pipeline.last().status, PoseStatus::TooFewBlobs);
-	Image white(camera.value.width, camera.value.height, 255);
+	Image white(camera.value().width, camera.value().height, 255);
 	EXPECT_FALSE(pipeline.process(white.view()).found);
 	Image small(100, 100, 0);
 	EXPECT_FALSE(pipeline.process(small.view()).found);

@@ -74,15 +74,15 @@ constexpr double kPi = 3.14159265358979323846;
 TargetModel loadTarget(const char *name)
 {
 	auto r = loadTargetModel(kData + "/" + name);
-	EXPECT_TRUE(r.ok()) << r.error;
-	return r.value;
+	EXPECT_TRUE(r.isOk()) << r.message();
+	return r.value();
 }
 
 CameraIntrinsics loadCamera(const char *name)
 {
 	auto r = loadCameraIntrinsics(kData + "/" + name);
-	EXPECT_TRUE(r.ok()) << r.error;
-	return r.value;
+	EXPECT_TRUE(r.isOk()) << r.message();
+	return r.value();
 }
 
 /* A flat square board: four LEDs, one face, 200 mm side. */
@@ -1275,7 +1275,7 @@ TEST(RendererHard, NewTargetsAndTheWideCameraAreValid)
 	};
 	for (const Expect &e : { Expect{ "pyramid.json", 8, 5 }, Expect{ "roof.json", 8, 3 } }) {
 		const TargetModel m = loadTarget(e.name);
-		EXPECT_EQ(m.validate(), "") << e.name;
+		EXPECT_EQ(m.validate().message(), "") << e.name;
 		EXPECT_EQ(m.points_mm.size(), e.leds);
 		EXPECT_EQ(m.faces.size(), e.faces);
 		EXPECT_GE(m.diameterMm(), 150.0);

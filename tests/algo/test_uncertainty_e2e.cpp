@@ -209,15 +209,15 @@ void report(const char *what, const Figures &fig)
 TEST(UncertaintyE2e, PoseCovarianceIsCalibratedOnRenderedFrames)
 {
 	const auto target = loadTargetModel(kData + "/wedge.json");
-	ASSERT_TRUE(target.ok()) << target.error;
+	ASSERT_TRUE(target.isOk()) << target.message();
 	const auto cam1456 = loadCameraIntrinsics(kData + "/cam1456.json");
-	ASSERT_TRUE(cam1456.ok()) << cam1456.error;
+	ASSERT_TRUE(cam1456.isOk()) << cam1456.message();
 	const auto cam512 = loadCameraIntrinsics(kData + "/cam512.json");
-	ASSERT_TRUE(cam512.ok()) << cam512.error;
+	ASSERT_TRUE(cam512.isOk()) << cam512.message();
 
 	Figures f1456, f512, all;
-	run(target.value, cam1456.value, 350.0, 2100.0, 300, 11, &f1456);
-	run(target.value, cam512.value, 200.0, 1400.0, 800, 12, &f512);
+	run(target.value(), cam1456.value(), 350.0, 2100.0, 300, 11, &f1456);
+	run(target.value(), cam512.value(), 200.0, 1400.0, 800, 12, &f512);
 	report("cam1456", f1456);
 	report("cam512", f512);
 	for (const Figures *f : { &f1456, &f512 }) {
@@ -260,9 +260,9 @@ TEST(UncertaintyE2e, PoseCovarianceIsCalibratedOnRenderedFrames)
 TEST(UncertaintyE2e, BloomedClippedSpotsAreUnbiasedAndTheirSigmaHonest)
 {
 	const auto target = loadTargetModel(kData + "/wedge.json");
-	ASSERT_TRUE(target.ok()) << target.error;
+	ASSERT_TRUE(target.isOk()) << target.message();
 	const auto cam1456 = loadCameraIntrinsics(kData + "/cam1456.json");
-	ASSERT_TRUE(cam1456.ok()) << cam1456.error;
+	ASSERT_TRUE(cam1456.isOk()) << cam1456.message();
 	struct Case {
 		double bloom, gradient;
 	};
@@ -271,7 +271,7 @@ TEST(UncertaintyE2e, BloomedClippedSpotsAreUnbiasedAndTheirSigmaHonest)
 			      Case{ 3.0, 30.0 } }) {
 		Figures fig;
 		SpotFigures spots;
-		run(target.value, cam1456.value, 350.0, 2100.0, 200,
+		run(target.value(), cam1456.value(), 350.0, 2100.0, 200,
 		    21 + static_cast<std::uint64_t>(c.bloom), &fig, c.bloom, &spots, c.gradient);
 		char what[64];
 		std::snprintf(what, sizeof(what), "bloom %.0f, gradient %.0f", c.bloom, c.gradient);

@@ -44,8 +44,8 @@ const Frames &frames()
 	static Frames f = [] {
 		Frames x;
 		const std::string data = DOCKPOSE_TEST_DATA;
-		x.target = loadTargetModel(data + "/wedge.json").value;
-		x.camera = loadCameraIntrinsics(data + "/cam1456.json").value;
+		x.target = loadTargetModel(data + "/wedge.json").value();
+		x.camera = loadCameraIntrinsics(data + "/cam1456.json").value();
 		std::uint64_t seed = 41;
 		for (Scenario s : kScenarios) {
 			EvaluationConfig config;

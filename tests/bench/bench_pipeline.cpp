@@ -40,8 +40,8 @@ const Fixture &fixture()
 	static Fixture f = [] {
 		Fixture x;
 		const std::string data = DOCKPOSE_TEST_DATA;
-		x.target = loadTargetModel(data + "/wedge.json").value;
-		x.camera = loadCameraIntrinsics(data + "/cam1456.json").value;
+		x.target = loadTargetModel(data + "/wedge.json").value();
+		x.camera = loadCameraIntrinsics(data + "/cam1456.json").value();
 		FrameRenderer renderer(x.target, x.camera);
 		/* A slow approach: consecutive frames differ as at camera rate, and 32 frames
 		 * (50 MB) do not fit in any cache, as frames fresh from the camera. */

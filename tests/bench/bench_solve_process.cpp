@@ -79,8 +79,8 @@ const Scene &scene(bool hidden_led)
 	if (s)
 		return *s;
 	s = std::make_unique<Scene>();
-	s->target = loadTargetModel(kTarget).value;
-	s->camera = loadCameraIntrinsics(kCamera).value;
+	s->target = loadTargetModel(kTarget).value();
+	s->camera = loadCameraIntrinsics(kCamera).value();
 	FrameRenderer renderer(s->target, s->camera);
 	Image img;
 	RenderTruth truth;
@@ -299,8 +299,9 @@ void solveProcessVsInProcess(benchmark::State &state)
 			const FrameSet set(s, "one", 1);
 			one = solveProcess(set, 1);
 		}
-		if (!tool.error.empty() || !one.error.empty()) {
-			state.SkipWithError((tool.error.empty() ? one.error : tool.error).c_str());
+		if (!tool.message().empty() || !one.message().empty()) {
+			state.SkipWithError(
+				(tool.message().empty() ? one.message() : tool.message()).c_str());
 			return;
 		}
 		state.SetIterationTime(tool.seconds);

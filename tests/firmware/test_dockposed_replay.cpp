@@ -76,11 +76,11 @@ void renderApproach(const std::string &dir, bool unlit_odd)
 {
 	const auto target = dockpose::loadTargetModel(kSource + "/board/sim/target.json");
 	const auto camera = dockpose::loadCameraIntrinsics(kSource + "/board/sim/camera.json");
-	ASSERT_TRUE(target.ok()) << target.error;
-	ASSERT_TRUE(camera.ok()) << camera.error;
+	ASSERT_TRUE(target.isOk()) << target.message();
+	ASSERT_TRUE(camera.isOk()) << camera.message();
 	std::filesystem::create_directories(dir);
-	dockpose::FrameRenderer renderer(target.value, camera.value);
-	dockpose::Image frame(camera.value.width, camera.value.height);
+	dockpose::FrameRenderer renderer(target.value(), camera.value());
+	dockpose::Image frame(camera->width, camera->height);
 	for (int i = 0; i < kFrames; ++i) {
 		const double s = static_cast<double>(i) / (kFrames - 1);
 		dockpose::Pose pose;
@@ -98,8 +98,8 @@ void renderApproach(const std::string &dir, bool unlit_odd)
 				nullptr);
 		char name[32];
 		std::snprintf(name, sizeof(name), "/frame_%04d.pgm", i);
-		const std::string err = dockpose::writePgm(dir + name, frame.view());
-		ASSERT_TRUE(err.empty()) << err;
+		const dockpose::Status written = dockpose::writePgm(dir + name, frame.view());
+		ASSERT_TRUE(written.isOk()) << written.message();
 	}
 }
 

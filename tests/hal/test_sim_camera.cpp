@@ -46,15 +46,15 @@ const std::string kData = DOCKPOSE_TEST_DATA;
 TargetModel wedge()
 {
 	auto r = loadTargetModel(kData + "/wedge.json");
-	EXPECT_TRUE(r.ok()) << r.error;
-	return r.value;
+	EXPECT_TRUE(r.isOk()) << r.message();
+	return r.value();
 }
 
 CameraIntrinsics cam512()
 {
 	auto r = loadCameraIntrinsics(kData + "/cam512.json");
-	EXPECT_TRUE(r.ok()) << r.error;
-	return r.value;
+	EXPECT_TRUE(r.isOk()) << r.message();
+	return r.value();
 }
 
 /* A static scene (the target holds still) with clutter and no noise. */
@@ -588,7 +588,7 @@ void writeFrames(const std::string &dir, int count)
 	for (int i = 0; i < count; ++i) {
 		char name[32];
 		std::snprintf(name, sizeof(name), "/frame_%04d.pgm", i);
-		ASSERT_EQ(writePgm(dir + name, patternFrame(i).view()), "");
+		ASSERT_EQ(writePgm(dir + name, patternFrame(i).view()).message(), "");
 	}
 }
 
@@ -598,7 +598,7 @@ TEST(ReplayCamera, DeliversTheFolderInOrderThenStops)
 	ASSERT_FALSE(dir.path().empty());
 	writeFrames(dir.path(), 6);
 	std::ofstream(dir.path() + "/notes.txt") << "not a frame\n";
-	ASSERT_EQ(writePgm(dir.path() + "/other.pgm", patternFrame(99).view()), "");
+	ASSERT_EQ(writePgm(dir.path() + "/other.pgm", patternFrame(99).view()).message(), "");
 
 	ReplayCamera camera(dir.path(), false);
 	/* 16 buffers hold the whole replay: nothing is dropped however slow this thread is. */
@@ -691,7 +691,9 @@ TEST(ReplayCamera, ErrorsNameTheFolderOrFile)
 		const std::string mixed = dir.path() + "/mixed";
 		fs::create_directory(mixed);
 		writeFrames(mixed, 3);
-		ASSERT_EQ(writePgm(mixed + "/frame_0002.pgm", patternFrame(2, 32, 32).view()), "");
+		ASSERT_EQ(writePgm(mixed + "/frame_0002.pgm", patternFrame(2, 32, 32).view())
+				  .message(),
+			  "");
 		ReplayCamera camera(mixed, false);
 		const Status s = camera.configure(config(5000));
 		ASSERT_FALSE(s.isOk());

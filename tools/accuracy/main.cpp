@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -83,9 +84,8 @@ void jsonTally(std::ostream &os, const ScenarioTally &t)
 	os << (first ? "}" : " }") << " }";
 }
 
-} /* namespace */
-
-int main(int argc, char **argv)
+/* The tool itself; main() turns an unexpected exception into a message and exit 2. */
+int run(int argc, char **argv)
 {
 	CLI::App app{
 		"dockpose-accuracy: pose accuracy and robustness on rendered frames with known truth"
@@ -148,12 +148,12 @@ int main(int argc, char **argv)
 
 	const auto target = loadTargetModel(target_path);
 	if (!target) {
-		std::fprintf(stderr, "dockpose-accuracy: %s\n", target.error.c_str());
+		std::fprintf(stderr, "dockpose-accuracy: %s\n", target.message().c_str());
 		return 2;
 	}
 	const auto camera = loadCameraIntrinsics(camera_path);
 	if (!camera) {
-		std::fprintf(stderr, "dockpose-accuracy: %s\n", camera.error.c_str());
+		std::fprintf(stderr, "dockpose-accuracy: %s\n", camera.message().c_str());
 		return 2;
 	}
 
@@ -178,7 +178,7 @@ int main(int argc, char **argv)
 	};
 	std::map<int, Bin> bins;
 	const double bin_ratio = std::pow(e.max_range_mm / e.min_range_mm, 1.0 / 6.0);
-	auto binOf = [&](double range) {
+	auto bin_of = [&](double range) {
 		return std::clamp(
 			static_cast<int>(std::log(range / e.min_range_mm) / std::log(bin_ratio)), 0,
 			5);
@@ -190,7 +190,7 @@ int main(int argc, char **argv)
 	 * congruent face); more are what the search has beyond one face.
 	 */
 	std::map<int, std::array<int, 2>> by_drawn;
-	auto onFrame = [&](const FrameOutcome &f, const Image &) {
+	auto on_frame = [&](const FrameOutcome &f, const Image &) {
 		const PoseResult &r = *f.result;
 		if (f.face_complete) {
 			auto &c = by_drawn[__builtin_popcount(f.render.visible_mask)];
@@ -198,7 +198,7 @@ int main(int argc, char **argv)
 			c[1] += f.correct ? 1 : 0;
 		}
 		if (!f.target_free) {
-			Bin &b = bins[binOf(f.range_mm)];
+			Bin &b = bins[bin_of(f.range_mm)];
 			++b.frames;
 			if (r.found) {
 				++b.found;
@@ -231,7 +231,7 @@ int main(int argc, char **argv)
 		ek.scenario = scenarios[k];
 		ek.seed = e.seed + k;
 		const EvaluationTally tk =
-			evaluate(target.value, camera.value, PipelineConfig{}, ek, onFrame);
+			evaluate(target.value(), camera.value(), PipelineConfig{}, ek, on_frame);
 		t.frames += tk.frames;
 		t.found += tk.found;
 		t.correct += tk.correct;
@@ -253,7 +253,7 @@ int main(int argc, char **argv)
 		std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
 		return v[v.size() / 2];
 	};
-	auto maxOf = [](const std::vector<double> &v) {
+	auto max_of = [](const std::vector<double> &v) {
 		return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end());
 	};
 
@@ -264,8 +264,8 @@ int main(int argc, char **argv)
 		what += s == Scenario::Legacy ? (e.clutter ? "clutter + occlusion" : "clean")
 					      : scenarioName(s);
 	}
-	std::printf("target %s, camera %dx%d, %d frames, %s, %s, %s\n", target.value.name.c_str(),
-		    camera.value.width, camera.value.height, t.frames, what.c_str(),
+	std::printf("target %s, camera %dx%d, %d frames, %s, %s, %s\n", target.value().name.c_str(),
+		    camera.value().width, camera.value().height, t.frames, what.c_str(),
 		    e.any_side ? "any side" : "legacy poses",
 		    e.track ? "tracking" : "each frame cold");
 	std::printf("%-17s %7s %7s %6s %12s %12s %12s %12s\n", "range mm", "frames", "found%",
@@ -274,7 +274,7 @@ int main(int argc, char **argv)
 		const double lo = e.min_range_mm * std::pow(bin_ratio, index);
 		std::printf("%7.0f - %7.0f %7d %6.1f%% %6d %12.3f %12.3f %12.2f %12.2f\n", lo,
 			    lo * bin_ratio, b.frames, 100.0 * b.found / std::max(1, b.frames),
-			    b.wrong, median(b.rot), maxOf(b.rot), median(b.trans), median(b.z));
+			    b.wrong, median(b.rot), max_of(b.rot), median(b.trans), median(b.z));
 	}
 
 	std::printf("\n%-14s %7s %9s %9s %8s %6s %11s  %s\n", "scenario", "frames", "complete",
@@ -321,9 +321,9 @@ int main(int argc, char **argv)
 				     json_path.c_str());
 			return 2;
 		}
-		js << "{\n  \"target\": \"" << target.value.name << "\", \"camera\": \""
-		   << camera.value.width << "x" << camera.value.height << "\", \"seed\": " << e.seed
-		   << ", \"frames_per_scenario\": " << e.frames
+		js << "{\n  \"target\": \"" << target.value().name << R"(", "camera": ")"
+		   << camera.value().width << "x" << camera.value().height << R"(", "seed": )"
+		   << e.seed << ", \"frames_per_scenario\": " << e.frames
 		   << ", \"min_range_mm\": " << e.min_range_mm
 		   << ", \"max_range_mm\": " << e.max_range_mm
 		   << ", \"any_side\": " << (e.any_side ? "true" : "false")
@@ -347,4 +347,16 @@ int main(int argc, char **argv)
 		js << "\n}\n";
 	}
 	return t.wrong == 0 ? 0 : 1;
+}
+
+} /* namespace */
+
+int main(int argc, char **argv)
+{
+	try {
+		return run(argc, argv);
+	} catch (const std::exception &e) {
+		std::fprintf(stderr, "dockpose-accuracy: %s\n", e.what());
+		return 2;
+	}
 }

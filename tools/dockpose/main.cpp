@@ -31,6 +31,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -57,6 +58,7 @@ using dockpose::tool::JsonLine;
 constexpr int kExitOk = 0;
 constexpr int kExitImageFailed = 1;
 constexpr int kExitUsage = 2;
+constexpr int kExitInternal = 3; /* an unexpected exception: a bug, or out of memory */
 
 /* "a,b,c,..." -> exactly n finite numbers, else an error sentence. */
 std::string parseNumbers(const std::string &text, std::size_t n, const char *what,
@@ -70,9 +72,11 @@ std::string parseNumbers(const std::string &text, std::size_t n, const char *wha
 		const double v = std::strtod(item.c_str(), &end);
 		while (end && *end == ' ')
 			++end;
-		if (item.empty() || !end || *end != '\0' || !std::isfinite(v))
-			return std::string(what) + " \"" + text + "\": '" + item +
-			       "' is not a number";
+		if (item.empty() || !end || *end != '\0' || !std::isfinite(v)) {
+			std::string problem = what;
+			problem.append(" \"").append(text).append("\": '").append(item);
+			return problem.append("' is not a number");
+		}
 		out->push_back(v);
 	}
 	if (out->size() != n)
@@ -91,16 +95,16 @@ bool loadFiles(const std::string &target_path, const std::string &camera_path, F
 {
 	auto target = loadTargetModel(target_path);
 	if (!target) {
-		std::cerr << "dockpose: bad target model: " << target.error << "\n";
+		std::cerr << "dockpose: bad target model: " << target.message() << "\n";
 		return false;
 	}
 	auto camera = loadCameraIntrinsics(camera_path);
 	if (!camera) {
-		std::cerr << "dockpose: bad camera file: " << camera.error << "\n";
+		std::cerr << "dockpose: bad camera file: " << camera.message() << "\n";
 		return false;
 	}
-	files->target = std::move(target.value);
-	files->camera = camera.value;
+	files->target = std::move(target).value();
+	files->camera = camera.value();
 	return true;
 }
 
@@ -186,7 +190,7 @@ int runSolve(const SolveArgs &args)
 		line.clear();
 		line.raw("{\"image\": ").string(path);
 		ImageView frame;
-		std::string error = reader.read(path, &frame);
+		std::string error = reader.read(path, &frame).message();
 		if (error.empty() &&
 		    (frame.width != files.camera.width || frame.height != files.camera.height))
 			error = path + ": the image is " + std::to_string(frame.width) + "x" +
@@ -195,7 +199,7 @@ int runSolve(const SolveArgs &args)
 				std::to_string(files.camera.height);
 		if (!error.empty()) {
 			std::cerr << "dockpose solve: " << error << "\n";
-			line.raw(", \"found\": false, \"error\": ").string(error).raw("}");
+			line.raw(R"(, "found": false, "error": )").string(error).raw("}");
 			line.writeTo(stdout);
 			exit_code = kExitImageFailed;
 			continue;
@@ -300,9 +304,9 @@ int runRender(const RenderArgs &args)
 			renderer.render(pose, args.options, seed, &frame, &truth);
 			char name[32];
 			std::snprintf(name, sizeof(name), "frame_%04d.pgm", index);
-			const std::string err = writePgm((dir / name).string(), frame.view());
-			if (!err.empty()) {
-				std::cerr << "dockpose render: " << err << "\n";
+			const Status written = writePgm((dir / name).string(), frame.view());
+			if (!written) {
+				std::cerr << "dockpose render: " << written.message() << "\n";
 				return kExitImageFailed;
 			}
 			const Eigen::Quaterniond q = quaternionFromRotation(pose.R);
@@ -339,16 +343,15 @@ int runRender(const RenderArgs &args)
 	return kExitOk;
 }
 
-} /* namespace */
-
-int main(int argc, char **argv)
+/* The tool itself; main() turns an unexpected exception into a message and exit 3. */
+int run(int argc, char **argv)
 {
 	CLI::App app{
 		"dockpose: 6-DoF pose of an infrared LED docking target from 8-bit frames.\n"
 		"Conventions: camera frame x right, y down, z forward, mm; pose X_c = R X_t + t;\n"
 		"quaternion (w, x, y, z) with w >= 0; R = Rx(roll) Ry(pan) Rz(tilt), degrees.\n"
 		"Exit codes: 0 success, 1 an image could not be read or written, 2 bad arguments\n"
-		"or a bad target/camera file.",
+		"or a bad target/camera file, 3 an unexpected error (a bug; its message on stderr).",
 		"dockpose"
 	};
 	app.require_subcommand(1);
@@ -468,4 +471,16 @@ int main(int argc, char **argv)
 		return runRender(render);
 	}
 	return kExitUsage;
+}
+
+} /* namespace */
+
+int main(int argc, char **argv)
+{
+	try {
+		return run(argc, argv);
+	} catch (const std::exception &e) {
+		std::cerr << "dockpose: " << e.what() << "\n";
+		return kExitInternal;
+	}
 }
