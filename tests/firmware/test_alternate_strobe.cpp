@@ -9,7 +9,7 @@
  *  - the pulse scheduling on a hal::StrobeController driving a hal::RecordingStrobe: pulses
  *    at the next two even frames, the exposure grown by the margin on both sides, only the
  *    new ones on the next frame, none within 0.2 ms of now (a late frame looks further ahead).
- *    Edges are checked one-sided (a switch never comes before its time) and 20 ms late at
+ *    Edges are checked one-sided (a switch never comes before its time) and 60 ms late at
  *    most: the machine is shared and loaded;
  *  - the difference: lit − unlit per pixel, saturated at 0, only with an unlit frame at most
  *    two frames older, never for mixed frames, not after forgetAmbient() or restart().
@@ -38,8 +38,8 @@ constexpr std::int64_t kPeriod30HzNs = 33333333;
 constexpr std::int64_t kMaxIntervalNs = 100 * kMs;
 /* AlternateStrobe's documented lead: no pulse starts before now + 0.2 ms. */
 constexpr std::int64_t kLeadNs = 200000;
-/* How late a switch may come on a loaded machine. */
-constexpr std::int64_t kLateNs = 20 * kMs;
+/* How late a switch may come on a loaded machine (pulses of 30 ms, 200 ms apart: no mix-up). */
+constexpr std::int64_t kLateNs = 60 * kMs;
 /* Any timestamp > 0 will do for the period estimate: it never reads the clock. */
 constexpr std::int64_t kT0 = 1000 * kMs;
 
