@@ -5,15 +5,8 @@ namespace dockpose::board {
 
 const char *strobeModeName(StrobeMode mode)
 {
-	switch (mode) {
-	case StrobeMode::Off:
-		return "off";
-	case StrobeMode::Constant:
-		return "constant";
-	case StrobeMode::Alternate:
-		return "alternate";
-	}
-	return "unknown";
+	const auto index = static_cast<std::size_t>(mode);
+	return index < kStrobeModeNames.size() ? kStrobeModeNames[index] : "unknown";
 }
 
 } /* namespace dockpose::board */

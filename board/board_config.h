@@ -11,6 +11,7 @@
  */
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 
@@ -20,18 +21,30 @@
 
 namespace dockpose::board {
 
+/*
+ * The modes a board file chooses (strobe.mode, pipeline.mode). The CAN
+ * protocol (firmware/protocol/dockpose_can.h) has the same enumerations, with
+ * the same values, on the wire: the protocol header stands alone (the arm
+ * controller builds it with nothing else) and the board layer sits below the
+ * firmware, so neither can include the other. The values here are therefore
+ * spelled out as the protocol's, firmware/modes.h checks each one at compile
+ * time and converts by a cast: no mapping switch.
+ */
 enum class StrobeMode : std::uint8_t {
-	Off,
-	Constant,
-	Alternate
+	Off = 0,
+	Constant = 1,
+	Alternate = 2
 };
+/* The board file's names, indexed by value: the one list of them (config and logs). */
+constexpr std::array<const char *, 3> kStrobeModeNames = { "off", "constant", "alternate" };
 const char *strobeModeName(StrobeMode mode);
 
 /* Which frames the pose comes from: full search and tracking, or a cold search every frame. */
 enum class TrackMode : std::uint8_t {
-	Track,
-	SearchOnly
+	Track = 0,
+	SearchOnly = 1
 };
+constexpr std::array<const char *, 2> kTrackModeNames = { "track", "search_only" };
 
 struct ReplayCameraConfig {
 	std::string folder; /* frame_*.pgm in name order (absolute after loading) */

@@ -3,12 +3,16 @@
  * Board configuration: JSON -> BoardConfig, with every error collected and
  * named by its JSON path (docs/configuration.md).
  *
- * The reader walks the document section by section. Each section records the
- * keys it knows while it reads them; what is left afterwards is an unknown key
- * (a typo), reported with the closest known key. Values are stored only when
- * they are valid, so cross-checks (exposure against the frame period, LED
- * counts against the target) see either the user's valid value or the default;
- * a cross-check is skipped when one of its inputs was already reported.
+ * The reader walks the document section by section, each by its table
+ * (firmware/config_table.h): every row is read and range-checked by its kind
+ * (readField), a subsection row recursing into its struct's table. Each
+ * section records the keys it knows while it reads them; what is left
+ * afterwards is an unknown key (a typo), reported with the closest known key.
+ * Values are stored only when they are valid, so the checks across keys
+ * (checkAcross: exposure against the frame period, LED counts against the
+ * target), run after a section's table, see either the user's valid value or
+ * the default; such a check is skipped when one of its inputs was already
+ * reported.
  */
 #include "firmware/config.h"
 
@@ -19,15 +23,19 @@
 #include <cstdio>
 #include <filesystem>
 #include <limits>
+#include <map>
 #include <set>
 #include <span>
 #include <system_error>
+#include <type_traits>
+#include <variant>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "algo/io/model_json.h"
 #include "board/board.h"
+#include "firmware/config_table.h"
 #include "firmware/protocol/dockpose_can.h"
 
 namespace dockpose::firmware {
@@ -37,25 +45,17 @@ namespace {
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-constexpr const char *kStrobeModes[] = { "off", "constant", "alternate" };
-constexpr const char *kTrackModes[] = { "track", "search_only" };
-/* CiA 301 / common CAN bit rates. */
-constexpr std::int64_t kCanBitrates[] = { 10000,  20000,  50000,  100000, 125000,
-					  250000, 500000, 800000, 1000000 };
+using config_table::Field;
+using config_table::Kind;
+using config_table::Range;
+
 /* The protocol's identifiers: base_id + 0 .. base_id + kCanIdSpan, 11 bits (firmware/protocol). */
 constexpr std::uint32_t kCanMaxId = 0x7ff;
 constexpr std::uint32_t kCanIdSpan = kCanMaxId - can::kMaxBaseId;
-constexpr std::size_t kIfNameSize = 16; /* IFNAMSIZ, including the terminating NUL */
 
-/* A number for a message: integers without a fraction, others with 6 significant digits. */
 std::string num(double v)
 {
-	char buf[40];
-	if (std::isfinite(v) && v == std::floor(v) && std::fabs(v) < 1e15)
-		std::snprintf(buf, sizeof(buf), "%.0f", v);
-	else
-		std::snprintf(buf, sizeof(buf), "%.6g", v);
-	return buf;
+	return config_table::formatNumber(v);
 }
 
 std::string hex(std::uint64_t v)
@@ -147,28 +147,6 @@ enum class Got : std::uint8_t {
 	Ok,
 	Bad
 };
-
-/* Closed or open interval; hi may be infinite. */
-struct Range {
-	double lo;
-	double hi;
-	bool lo_open = false;
-	bool hi_open = false;
-
-	bool contains(double v) const
-	{
-		return (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
-	}
-	std::string text() const
-	{
-		if (std::isinf(hi))
-			return std::string("(must be ") + (lo_open ? "> " : ">= ") + num(lo) + ")";
-		return std::string(lo_open ? "(" : "[") + num(lo) + ", " + num(hi) +
-		       (hi_open ? ")" : "]");
-	}
-};
-
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 class Checker
 {
@@ -342,8 +320,12 @@ bool asInt64(const json &j, std::int64_t *out)
 /* An upper bound for getInt() that is only the int's own limit (not shown in messages). */
 constexpr std::int64_t kNoLimit = std::numeric_limits<int>::max();
 
-Got getInt(Section &s, const char *key, std::int64_t lo, std::int64_t hi, int *out)
+Got getInt(Section &s, const char *key, const Range &range, int *out)
 {
+	const std::int64_t lo = std::isinf(range.lo) ? std::numeric_limits<int>::min()
+						     : static_cast<std::int64_t>(range.lo);
+	const std::int64_t hi = std::isinf(range.hi) ? kNoLimit
+						     : static_cast<std::int64_t>(range.hi);
 	const json *j = s.get(key);
 	if (!j)
 		return Got::Absent;
@@ -480,38 +462,6 @@ Got getPose(Section &s, const char *key, double out[6])
 	return Got::Ok;
 }
 
-/* The kernel's dev_valid_name(). Empty when fine, else why not. */
-std::string interfaceNameProblem(const std::string &name)
-{
-	if (name.empty())
-		return "must not be empty (a network interface such as \"can0\")";
-	if (name.size() >= kIfNameSize)
-		return quote(name) + " is " + std::to_string(name.size()) +
-		       " characters long; interface names have at most " +
-		       std::to_string(kIfNameSize - 1) + " (IFNAMSIZ)";
-	if (name == "." || name == "..")
-		return quote(name) + " is not an interface name";
-	for (char c : name)
-		if (c == '/' || c == ':' || std::isspace(static_cast<unsigned char>(c)))
-			return quote(name) +
-			       " is not an interface name (no '/', ':' or white space allowed)";
-	return {};
-}
-
-void readSynthetic(Section &syn, hal::SyntheticScene *out)
-{
-	getPose(syn, "from", out->from);
-	getPose(syn, "to", out->to);
-	getDouble(syn, "duration_s", { 0.0, kInf, true, false }, &out->duration_s);
-	getBool(syn, "loop", &out->loop);
-	getInt(syn, "reflections", 0, 1000, &out->reflections);
-	getInt(syn, "glints", 0, 1000, &out->glints);
-	getInt(syn, "hot_pixels", 0, 1000, &out->hot_pixels);
-	getDouble(syn, "noise_sigma", { 0.0, 50.0 }, &out->noise_sigma);
-	getUint64(syn, "seed", &out->seed);
-	syn.finish();
-}
-
 void checkReplayFolder(Checker &c, const std::string &path, const std::string &written,
 		       const std::string &folder)
 {
@@ -544,121 +494,28 @@ void checkReplayFolder(Checker &c, const std::string &path, const std::string &w
 	c.fail(path, shown + " holds no frame_*.pgm files");
 }
 
-void readCamera(Section &cam, CameraSection *out, CameraIntrinsics *model)
+/* A string that must be one of `values`; the message names them with `what`. */
+Got getOneOf(Section &s, const char *key, std::span<const std::int64_t> values, const char *what,
+	     int *out)
 {
-	Checker &c = cam.checker();
-	std::size_t index = 0;
-	const std::vector<const char *> backends = board::backendNames(board::BackendKind::Camera);
-	const Got backend = getChoice(cam, "backend", backends, &index, &out->backend);
-	if (backend == Got::Absent)
-		cam.missing("backend",
-			    "required key is missing (one of " + joinNames(backends) + ")");
-	getString(cam, "id", &out->id);
-	getInt(cam, "index", 0, 255, &out->index);
-	const Got width = getInt(cam, "width", 0, 16384, &out->width);
-	const Got height = getInt(cam, "height", 0, 16384, &out->height);
-	const Got rate =
-		getDouble(cam, "frame_rate_hz", { 0.0, 240.0, true, false }, &out->frame_rate_hz);
-	const Got exposure = getInt(cam, "exposure_us", 10, 1000000, &out->exposure_us);
-	getDouble(cam, "analogue_gain", { 1.0, 64.0 }, &out->analogue_gain);
-	getInt(cam, "buffer_count", 2, 16, &out->buffer_count);
-	const Got stall = getInt(cam, "stall_timeout_ms", 50, 60000, &out->stall_timeout_ms);
-	std::string intrinsics_written;
-	const Got intrinsics = getPath(cam, "intrinsics", &intrinsics_written, &out->intrinsics);
-	if (intrinsics == Got::Absent)
-		cam.missing("intrinsics",
-			    "required key is missing (the camera calibration JSON file)");
-
-	Section syn = subsection(cam, "synthetic", false);
-	readSynthetic(syn, &out->synthetic);
-
-	Section rep = subsection(cam, "replay", false);
-	std::string folder_written;
-	const Got folder = getPath(rep, "folder", &folder_written, &out->replay.folder);
-	getBool(rep, "loop", &out->replay.loop);
-	rep.finish();
-	cam.finish();
-
-	if (rate != Got::Bad && exposure != Got::Bad) {
-		const double period_us = 1e6 / out->frame_rate_hz;
-		if (out->exposure_us > period_us)
-			c.fail(cam.at("exposure_us"),
-			       std::to_string(out->exposure_us) +
-				       " us is longer than the frame period of " + num(period_us) +
-				       " us at camera.frame_rate_hz " + num(out->frame_rate_hz));
+	const json *j = s.get(key);
+	if (!j)
+		return Got::Absent;
+	std::int64_t v = 0;
+	if (!asInt64(*j, &v)) {
+		s.checker().fail(s.at(key), "expected an integer, got " + describe(*j));
+		return Got::Bad;
 	}
-	if (rate != Got::Bad && stall != Got::Bad) {
-		const double period_ms = 1e3 / out->frame_rate_hz;
-		if (out->stall_timeout_ms <= 2.0 * period_ms)
-			c.fail(cam.at("stall_timeout_ms"),
-			       std::to_string(out->stall_timeout_ms) +
-				       " ms is not more than 2 frame periods (2 x " +
-				       num(period_ms) + " ms at camera.frame_rate_hz " +
-				       num(out->frame_rate_hz) + ")");
+	if (std::find(values.begin(), values.end(), v) == values.end()) {
+		std::string list;
+		for (std::int64_t r : values)
+			list += (list.empty() ? "" : ", ") + std::to_string(r);
+		s.checker().fail(s.at(key),
+				 j->dump() + " is not " + what + " (one of " + list + ")");
+		return Got::Bad;
 	}
-
-	if (intrinsics == Got::Ok) {
-		const Result<CameraIntrinsics> k = loadCameraIntrinsics(out->intrinsics);
-		*model = k ? k.value() : CameraIntrinsics{}; /* empty when it did not load */
-		if (!k) {
-			c.fail(cam.at("intrinsics"), "cannot read camera intrinsics " +
-							     quote(intrinsics_written) + ": " +
-							     k.message());
-		} else if (width != Got::Bad && height != Got::Bad) {
-			const int w = k->width, h = k->height;
-			if ((out->width != 0 && out->width != w) ||
-			    (out->height != 0 && out->height != h)) {
-				c.fail(cam.at("intrinsics"),
-				       quote(intrinsics_written) + ": size " + std::to_string(w) +
-					       "x" + std::to_string(h) +
-					       " does not match camera.width/height " +
-					       std::to_string(out->width) + "x" +
-					       std::to_string(out->height) +
-					       " (calibrate at the size the camera runs at)");
-			} else {
-				out->width = w;
-				out->height = h;
-			}
-		}
-	}
-
-	if (backend == Got::Ok && out->backend == "replay") {
-		if (folder == Got::Absent)
-			c.fail(rep.at("folder"),
-			       "required when camera.backend is \"replay\" (a folder of frame_*.pgm)");
-		else if (folder == Got::Ok)
-			checkReplayFolder(c, rep.at("folder"), folder_written, out->replay.folder);
-	}
-}
-
-void readStrobe(Section &st, StrobeSection *out)
-{
-	Checker &c = st.checker();
-	std::size_t index = 0;
-	const std::vector<const char *> backends = board::backendNames(board::BackendKind::Strobe);
-	const Got backend = getChoice(st, "backend", backends, &index, &out->backend);
-	if (backend == Got::Absent)
-		st.missing("backend",
-			   "required key is missing (one of " + joinNames(backends) + ")");
-	const Got chip = getString(st, "chip", &out->chip);
-	const Got line = getInt(st, "line", 0, 1023, &out->line);
-	getBool(st, "active_low", &out->active_low);
-	if (getChoice(st, "mode", kStrobeModes, &index) == Got::Ok)
-		out->mode = static_cast<StrobeMode>(index);
-	getInt(st, "pulse_margin_us", 0, 10000, &out->pulse_margin_us);
-	st.finish();
-
-	if (backend == Got::Ok && out->backend == "gpiod") {
-		if (chip == Got::Absent)
-			c.fail(st.at("chip"), "required when strobe.backend is \"gpiod\" (a chip "
-					      "name like \"gpiochip0\", a path, or a label like "
-					      "\"pinctrl-rp1\")");
-		else if (chip == Got::Ok && out->chip.empty())
-			c.fail(st.at("chip"), "must not be empty when strobe.backend is \"gpiod\"");
-		if (line == Got::Absent)
-			c.fail(st.at("line"),
-			       "required when strobe.backend is \"gpiod\" (the line offset on the chip)");
-	}
+	*out = static_cast<int>(v);
+	return Got::Ok;
 }
 
 Got getCanId(Section &s, const char *key, std::uint32_t *out)
@@ -708,85 +565,146 @@ Got getCanId(Section &s, const char *key, std::uint32_t *out)
 	return Got::Ok;
 }
 
-void readCan(Section &can, CanSection *out)
+/*
+ * What the table pass found, by JSON path ("camera.exposure_us"), for the
+ * checks across keys: whether each key was absent, valid or reported, and
+ * each path as the file wrote it (for messages).
+ */
+class Reads
 {
-	Checker &c = can.checker();
-	std::size_t index = 0;
-	const std::vector<const char *> backends = board::backendNames(board::BackendKind::Can);
-	const Got backend = getChoice(can, "backend", backends, &index, &out->backend);
-	if (backend == Got::Absent)
-		can.missing("backend",
-			    "required key is missing (one of " + joinNames(backends) + ")");
-	const Got iface = getString(can, "interface", &out->interface);
-	if (iface == Got::Ok &&
-	    !(out->interface.empty() && backend == Got::Ok && out->backend != "socketcan")) {
-		const std::string problem = interfaceNameProblem(out->interface);
-		if (!problem.empty())
-			c.fail(can.at("interface"), problem);
+public:
+	Got got(const std::string &path) const
+	{
+		const auto it = got_.find(path);
+		return it == got_.end() ? Got::Absent : it->second;
 	}
-	std::string log_written;
-	if (getString(can, "log_file", &log_written) == Got::Ok && !log_written.empty())
-		out->log_file = c.resolve(log_written);
-	getCanId(can, "base_id", &out->base_id);
-	const json *bitrate = can.get("bitrate");
-	if (bitrate) {
-		std::int64_t v = 0;
-		if (!asInt64(*bitrate, &v)) {
-			c.fail(can.at("bitrate"), "expected an integer, got " + describe(*bitrate));
-		} else if (std::find(std::begin(kCanBitrates), std::end(kCanBitrates), v) ==
-			   std::end(kCanBitrates)) {
-			std::string rates;
-			for (std::int64_t r : kCanBitrates)
-				rates += (rates.empty() ? "" : ", ") + std::to_string(r);
-			c.fail(can.at("bitrate"),
-			       bitrate->dump() + " is not a standard CAN bit rate (one of " +
-				       rates + ")");
-		} else {
-			out->bitrate = static_cast<int>(v);
-		}
-	}
-	getInt(can, "tx_queue_depth", 1, 4096, &out->tx_queue_depth);
-	getInt(can, "heartbeat_hz", 1, 100, &out->heartbeat_hz);
-	can.finish();
+	const std::string &written(const std::string &path) const { return written_[path]; }
 
-	if (backend == Got::Ok && out->backend == "socketcan" && iface == Got::Absent)
-		c.fail(can.at("interface"),
-		       R"(required when can.backend is "socketcan" (an interface such as "can0"))");
+	void set(const std::string &path, Got got) { got_[path] = got; }
+	void setWritten(const std::string &path, std::string text)
+	{
+		written_[path] = std::move(text);
+	}
+
+private:
+	std::map<std::string, Got> got_;
+	mutable std::map<std::string, std::string> written_;
+};
+
+/* The checks across keys, run once a section's table has been read and its unknown keys reported. */
+template<typename S>
+void checkAcross(Section & /*section*/, S & /*out*/, const Reads & /*reads*/,
+		 BoardConfig & /*config*/)
+{
 }
 
-void readPipeline(Section &pl, PipelineSection *out, TargetModel *target_model)
+void checkAcross(Section &cam, CameraSection &out, const Reads &reads, BoardConfig &config)
+{
+	Checker &c = cam.checker();
+	const Got rate = reads.got(cam.at("frame_rate_hz"));
+	const Got exposure = reads.got(cam.at("exposure_us"));
+	const Got stall = reads.got(cam.at("stall_timeout_ms"));
+	if (rate != Got::Bad && exposure != Got::Bad) {
+		const double period_us = 1e6 / out.frame_rate_hz;
+		if (out.exposure_us > period_us)
+			c.fail(cam.at("exposure_us"),
+			       std::to_string(out.exposure_us) +
+				       " us is longer than the frame period of " + num(period_us) +
+				       " us at camera.frame_rate_hz " + num(out.frame_rate_hz));
+	}
+	if (rate != Got::Bad && stall != Got::Bad) {
+		const double period_ms = 1e3 / out.frame_rate_hz;
+		if (out.stall_timeout_ms <= 2.0 * period_ms)
+			c.fail(cam.at("stall_timeout_ms"),
+			       std::to_string(out.stall_timeout_ms) +
+				       " ms is not more than 2 frame periods (2 x " +
+				       num(period_ms) + " ms at camera.frame_rate_hz " +
+				       num(out.frame_rate_hz) + ")");
+	}
+
+	if (reads.got(cam.at("intrinsics")) == Got::Ok) {
+		const std::string &written = reads.written(cam.at("intrinsics"));
+		const Result<CameraIntrinsics> k = loadCameraIntrinsics(out.intrinsics);
+		config.camera_model = k ? k.value()
+					: CameraIntrinsics{}; /* empty when it did not load */
+		if (!k) {
+			c.fail(cam.at("intrinsics"), "cannot read camera intrinsics " +
+							     quote(written) + ": " + k.message());
+		} else if (reads.got(cam.at("width")) != Got::Bad &&
+			   reads.got(cam.at("height")) != Got::Bad) {
+			const int w = k->width, h = k->height;
+			if ((out.width != 0 && out.width != w) ||
+			    (out.height != 0 && out.height != h)) {
+				c.fail(cam.at("intrinsics"),
+				       quote(written) + ": size " + std::to_string(w) + "x" +
+					       std::to_string(h) +
+					       " does not match camera.width/height " +
+					       std::to_string(out.width) + "x" +
+					       std::to_string(out.height) +
+					       " (calibrate at the size the camera runs at)");
+			} else {
+				out.width = w;
+				out.height = h;
+			}
+		}
+	}
+
+	if (reads.got(cam.at("backend")) == Got::Ok && out.backend == "replay") {
+		const std::string folder_path = cam.at("replay.folder");
+		const Got folder = reads.got(folder_path);
+		if (folder == Got::Absent)
+			c.fail(folder_path,
+			       "required when camera.backend is \"replay\" (a folder of frame_*.pgm)");
+		else if (folder == Got::Ok)
+			checkReplayFolder(c, folder_path, reads.written(folder_path),
+					  out.replay.folder);
+	}
+}
+
+void checkAcross(Section &st, StrobeSection &out, const Reads &reads, BoardConfig & /*config*/)
+{
+	Checker &c = st.checker();
+	if (reads.got(st.at("backend")) != Got::Ok || out.backend != "gpiod")
+		return;
+	const Got chip = reads.got(st.at("chip"));
+	if (chip == Got::Absent)
+		c.fail(st.at("chip"), "required when strobe.backend is \"gpiod\" (a chip "
+				      "name like \"gpiochip0\", a path, or a label like "
+				      "\"pinctrl-rp1\")");
+	else if (chip == Got::Ok && out.chip.empty())
+		c.fail(st.at("chip"), "must not be empty when strobe.backend is \"gpiod\"");
+	if (reads.got(st.at("line")) == Got::Absent)
+		c.fail(st.at("line"),
+		       "required when strobe.backend is \"gpiod\" (the line offset on the chip)");
+}
+
+void checkAcross(Section &can, CanSection &out, const Reads &reads, BoardConfig & /*config*/)
+{
+	if (reads.got(can.at("backend")) == Got::Ok && out.backend == "socketcan" &&
+	    reads.got(can.at("interface")) == Got::Absent)
+		can.checker().fail(
+			can.at("interface"),
+			R"(required when can.backend is "socketcan" (an interface such as "can0"))");
+}
+
+void checkAcross(Section &pl, PipelineSection &out, const Reads &reads, BoardConfig &config)
 {
 	Checker &c = pl.checker();
-	std::string target_written;
-	const Got target = getPath(pl, "target", &target_written, &out->target);
-	if (target == Got::Absent)
-		pl.missing("target", "required key is missing (the target model JSON file)");
-	std::size_t index = 0;
-	if (getChoice(pl, "mode", kTrackModes, &index) == Got::Ok)
-		out->mode = static_cast<TrackMode>(index);
-	getDouble(pl, "max_rms_px", { 0.0, 5.0, true, false }, &out->max_rms_px);
-	getDouble(pl, "max_log10_nfa", { -40.0, -2.0 }, &out->max_log10_nfa);
-	const Got search = getInt(pl, "min_leds_search", 4, kNoLimit, &out->min_leds_search);
-	const Got track = getInt(pl, "min_leds_track", 4, kNoLimit, &out->min_leds_track);
-	getInt(pl, "full_frame_every", 1, 10000, &out->full_frame_every);
-	getInt(pl, "degraded_hold_frames", 0, 10000, &out->degraded_hold_frames);
-	getInt(pl, "lost_after_frames", 1, 1000, &out->lost_after_frames);
-	pl.finish();
-
+	const Got search = reads.got(pl.at("min_leds_search"));
 	bool search_ok = search != Got::Bad;
-	if (target == Got::Ok) {
-		const Result<TargetModel> model = loadTargetModel(out->target);
-		*target_model = model ? model.value()
-				      : TargetModel{}; /* empty when it did not load */
+	if (reads.got(pl.at("target")) == Got::Ok) {
+		const Result<TargetModel> model = loadTargetModel(out.target);
+		config.target_model = model ? model.value()
+					    : TargetModel{}; /* empty when it did not load */
 		if (!model) {
 			c.fail(pl.at("target"), "cannot read target model " +
-							quote(target_written) + ": " +
-							model.message());
+							quote(reads.written(pl.at("target"))) +
+							": " + model.message());
 		} else if (search_ok) {
 			const std::size_t leds = model->points_mm.size();
-			if (static_cast<std::size_t>(out->min_leds_search) > leds) {
+			if (static_cast<std::size_t>(out.min_leds_search) > leds) {
 				c.fail(pl.at("min_leds_search"),
-				       std::to_string(out->min_leds_search) +
+				       std::to_string(out.min_leds_search) +
 					       (search == Got::Absent ? " (the default)" : "") +
 					       " is more than the " + std::to_string(leds) +
 					       " LEDs of target " + quote(model->name));
@@ -794,11 +712,116 @@ void readPipeline(Section &pl, PipelineSection *out, TargetModel *target_model)
 			}
 		}
 	}
-	if (search_ok && track != Got::Bad && out->min_leds_track > out->min_leds_search)
-		c.fail(pl.at("min_leds_track"), std::to_string(out->min_leds_track) +
+	if (search_ok && reads.got(pl.at("min_leds_track")) != Got::Bad &&
+	    out.min_leds_track > out.min_leds_search)
+		c.fail(pl.at("min_leds_track"), std::to_string(out.min_leds_track) +
 							" is out of range [4, " +
-							std::to_string(out->min_leds_search) +
+							std::to_string(out.min_leds_search) +
 							"] (at most pipeline.min_leds_search)");
+}
+
+/* The string kinds (String, Path, Backend); *hint gets the backends for a missing key's message. */
+template<typename S>
+Got readString(Section &s, const Field<S> &f, const S *out, std::string *value, Reads *reads,
+	       std::string *hint)
+{
+	switch (f.kind) {
+	case Kind::Backend: {
+		const std::vector<const char *> names = board::backendNames(f.backend);
+		*hint = "one of " + joinNames(names);
+		std::size_t index = 0;
+		return getChoice(s, f.key, names, &index, value);
+	}
+	case Kind::Path: {
+		std::string written;
+		if (f.empty_ok) {
+			/* "" stays "" (no file); anything else is resolved. */
+			const Got got = getString(s, f.key, &written);
+			if (got == Got::Ok && !written.empty())
+				*value = s.checker().resolve(written);
+			return got;
+		}
+		const Got got = getPath(s, f.key, &written, value);
+		reads->setWritten(s.at(f.key), written);
+		return got;
+	}
+	default: {
+		const Got got = getString(s, f.key, value);
+		if (got != Got::Ok)
+			return got;
+		if (f.non_empty && value->empty()) {
+			s.checker().fail(s.at(f.key),
+					 "must not be empty (" + std::string(f.hint) + ")");
+			return Got::Bad;
+		}
+		if (f.check) {
+			const std::string problem = f.check(*out, *value);
+			if (!problem.empty())
+				s.checker().fail(s.at(f.key), problem);
+		}
+		return got;
+	}
+	}
+}
+
+template<typename S>
+void readObject(Section &section, S *out, Reads &reads, BoardConfig &config);
+
+/* Read one key as its row says, into its member of *out. */
+template<typename S>
+Got readField(Section &s, const Field<S> &f, S *out, Reads &reads, BoardConfig &config)
+{
+	const char *key = f.key;
+	std::string hint = f.hint;
+	Got got = Got::Absent;
+	std::visit(
+		[&](auto member) {
+			using M = decltype(member);
+			if constexpr (!std::is_same_v<M, std::monostate>) {
+				auto &v = out->*member;
+				using V = std::remove_cvref_t<decltype(v)>;
+				if constexpr (std::is_same_v<V, int>) {
+					got = f.kind == Kind::OneOf
+						      ? getOneOf(s, key, f.one_of, f.hint, &v)
+						      : getInt(s, key, f.range, &v);
+				} else if constexpr (std::is_same_v<V, double>) {
+					got = getDouble(s, key, f.range, &v);
+				} else if constexpr (std::is_same_v<V, bool>) {
+					got = getBool(s, key, &v);
+				} else if constexpr (std::is_same_v<V, std::uint32_t>) {
+					got = getCanId(s, key, &v);
+				} else if constexpr (std::is_same_v<V, std::uint64_t>) {
+					got = getUint64(s, key, &v);
+				} else if constexpr (std::is_same_v<V, double[6]>) {
+					got = getPose(s, key, v);
+				} else if constexpr (std::is_enum_v<V>) {
+					std::size_t index = 0;
+					got = getChoice(s, key, f.choices, &index);
+					if (got == Got::Ok)
+						v = static_cast<V>(index);
+				} else if constexpr (std::is_same_v<V, std::string>) {
+					got = readString(s, f, out, &v, &reads, &hint);
+				} else {
+					Section sub = subsection(s, key, f.required);
+					readObject(sub, &v, reads, config);
+					got = sub.present() ? Got::Ok : Got::Absent;
+				}
+			}
+		},
+		f.member);
+	if (got == Got::Absent && f.required && f.kind != Kind::Object)
+		s.missing(key, "required key is missing (" + hint + ")");
+	return got;
+}
+
+/* Every key of the section's table, its unknown keys, then its checks across keys. */
+template<typename S>
+void readObject(Section &section, S *out, Reads &reads, BoardConfig &config)
+{
+	for (const Field<S> &f : config_table::fieldsOf<S>())
+		reads.set(section.at(f.key), readField(section, f, out, reads, config));
+	section.finish();
+	checkAcross(section, *out, reads, config);
 }
 
 /* Parse JSON (comments allowed), reporting duplicate keys by path. */
@@ -902,26 +925,9 @@ ConfigResult parseWithSource(const std::string &json_text, const std::string &ba
 		base = fs::path(base_dir);
 	Checker checker(base.lexically_normal());
 
-	BoardConfig &cfg = result.config;
 	Section top(&checker, &doc, "");
-	const Got board = getString(top, "board", &cfg.board);
-	if (board == Got::Absent)
-		top.missing("board", "required key is missing (the board's name, e.g. \"sim\")");
-	else if (board == Got::Ok && cfg.board.empty())
-		checker.fail("board", "must not be empty (the board's name, e.g. \"sim\")");
-
-	Section camera = subsection(top, "camera", true);
-	readCamera(camera, &cfg.camera, &cfg.camera_model);
-	Section strobe = subsection(top, "strobe", true);
-	readStrobe(strobe, &cfg.strobe);
-	Section can = subsection(top, "can", true);
-	readCan(can, &cfg.can);
-	Section pipeline = subsection(top, "pipeline", true);
-	readPipeline(pipeline, &cfg.pipeline, &cfg.target_model);
-	Section systemd = subsection(top, "systemd", false);
-	getBool(systemd, "notify", &cfg.systemd.notify);
-	systemd.finish();
-	top.finish();
+	Reads reads;
+	readObject(top, &result.config, reads, result.config);
 
 	std::vector<std::string> errors = checker.take();
 	result.errors.insert(result.errors.end(), errors.begin(), errors.end());

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <string>
 
+#include "firmware/modes.h"
 #include "hal/clock.h"
 
 namespace dockpose::firmware {
@@ -23,24 +24,6 @@ constexpr std::int64_t kRestartIntervalNs = 2 * kNsPerS;
  * few frames late, and the background they give must be re-measured.
  */
 constexpr int kWholeFramesAfterLightChange = 4;
-
-can::StrobeMode toCan(StrobeMode mode)
-{
-	switch (mode) {
-	case StrobeMode::Off:
-		return can::StrobeMode::Off;
-	case StrobeMode::Constant:
-		return can::StrobeMode::Constant;
-	case StrobeMode::Alternate:
-		return can::StrobeMode::Alternate;
-	}
-	return can::StrobeMode::Off;
-}
-
-can::TrackMode toCan(TrackMode mode)
-{
-	return mode == TrackMode::SearchOnly ? can::TrackMode::SearchOnly : can::TrackMode::Track;
-}
 
 hal::CanFrame toHal(const can::RawFrame &raw)
 {
@@ -577,22 +560,8 @@ void Daemon::applyCommand(const can::CommandData &command)
 			std::fprintf(log_, "dockposed: camera controls: %s\n", s.message().c_str());
 		}
 	}
-	const TrackMode mode = command.mode == can::TrackMode::SearchOnly ? TrackMode::SearchOnly
-									  : TrackMode::Track;
-	StrobeMode strobe = strobe_mode_;
-	switch (command.strobe) {
-	case can::StrobeMode::Off:
-		strobe = StrobeMode::Off;
-		break;
-	case can::StrobeMode::Constant:
-		strobe = StrobeMode::Constant;
-		break;
-	case can::StrobeMode::Alternate:
-		strobe = StrobeMode::Alternate;
-		break;
-	case can::StrobeMode::Unchanged:
-		break;
-	}
+	const TrackMode mode = fromCan(command.mode);
+	const StrobeMode strobe = fromCan(command.strobe).value_or(strobe_mode_);
 	const bool changed = command.enable != enabled_ || mode != track_mode_ ||
 			     strobe != strobe_mode_;
 	enabled_ = command.enable;

@@ -24,6 +24,7 @@
 
 #include "board/board.h"
 #include "firmware/config.h"
+#include "firmware/config_table.h"
 #include "firmware/daemon.h"
 
 namespace {
@@ -154,6 +155,24 @@ int main(int argc, char **argv)
 		   "seconds the backends may take to open and start before dockposed gives up (exit 75)")
 		->check(CLI::Range(1, 600))
 		->capture_default_str();
+	/* Prints a key table of docs/configuration.md (scripts/update-config-doc), then exits. */
+	std::string doc_section;
+	std::string doc_sections;
+	for (const std::string &name : firmware::config_table::docSections())
+		doc_sections += (doc_sections.empty() ? "" : ", ") + name;
+	app.add_option_function<std::string>(
+		   "--print-config-doc",
+		   [](const std::string &section) {
+			   std::fputs(firmware::config_table::docTable(section).c_str(), stdout);
+			   throw CLI::Success();
+		   },
+		   "print the markdown key table of one board file section (" + doc_sections +
+			   ") and exit")
+		->check([](const std::string &section) {
+			return firmware::config_table::docTable(section).empty()
+				       ? "not a section of the board file"
+				       : std::string();
+		});
 	try {
 		app.parse(argc, argv);
 	} catch (const CLI::ParseError &e) {

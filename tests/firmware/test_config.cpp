@@ -4,10 +4,13 @@
  * each gives exactly the expected errors (JSON path, bad value, what was
  * expected); defaults fill in; relative paths resolve against the file.
  */
+#include <algorithm>
+#include <cctype>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -22,6 +25,8 @@
 #include "algo/pipeline.h"
 #include "board/board.h"
 #include "firmware/config.h"
+#include "firmware/config_table.h"
+#include "firmware/modes.h"
 
 namespace dockpose::firmware {
 namespace {
@@ -755,71 +760,58 @@ TEST_F(ConfigTest, ExposureUpToTheFramePeriodIsAccepted)
 }
 
 /*
- * docs/configuration.md's key tables against the reader: every section's
- * keys as the reader knows them (its "unknown key" message lists them) are
- * exactly the keys the doc's table for that section names, plus the
- * subsections it documents under their own headings; and the documented
- * backends of each section are the ones the built boards wire
- * (board::backendNames). A key added, renamed or dropped on one side only
+ * docs/configuration.md's key tables are the reader's: each section's table
+ * between its markers is exactly what the key tables print
+ * (config_table::docTable, `dockposed --print-config-doc SECTION`), so a key,
+ * default, range, unit, backend name or line of doc changed on one side only
  * fails here.
  */
-std::map<std::string, std::set<std::string>>
-documentedKeys(const std::string &doc, std::map<std::string, std::string> *backends)
+std::map<std::string, std::string> generatedBlocks(const std::string &doc)
 {
-	std::map<std::string, std::set<std::string>> keys;
-	std::string section = "?";
-	std::istringstream in(doc);
-	const std::regex heading(R"(^#{3,4} (Top level|`([a-z_.]+)`)$)");
-	for (std::string line; std::getline(in, line);) {
-		std::smatch m;
-		if (std::regex_match(line, m, heading)) {
-			section = m[2].matched ? m[2].str() : "";
-			keys[section];
-			const std::size_t dot = section.rfind('.');
-			const std::string parent = section.empty() ? "?"
-						   : dot == std::string::npos
-							   ? ""
-							   : section.substr(0, dot);
-			keys[parent].insert(section.substr(dot == std::string::npos ? 0 : dot + 1));
-			continue;
-		}
-		if (line.rfind("## ", 0) == 0) {
-			section = "?";
-			continue;
-		}
-		if (section == "?" || line.rfind("| `", 0) != 0)
-			continue;
-		const std::size_t end = line.find(" |", 2);
-		const std::string first = line.substr(2, end - 2);
-		const std::regex key_re("`([a-z0-9_]+)`");
-		for (auto it = std::sregex_iterator(first.begin(), first.end(), key_re);
-		     it != std::sregex_iterator(); ++it)
-			keys[section].insert((*it)[1].str());
-		if (first == "`backend`") {
-			/* | `backend` | string | **required** | `a`, `b` | ... : the fourth cell. */
-			std::vector<std::string> cells;
-			std::istringstream row(line);
-			for (std::string cell; std::getline(row, cell, '|');)
-				cells.push_back(cell);
-			(*backends)[section] = cells.size() > 4 ? cells[4] : "";
-		}
-	}
-	keys.erase("?");
-	return keys;
+	std::map<std::string, std::string> blocks;
+	const std::regex block(
+		R"(<!-- generated: dockposed --print-config-doc (\S+) -->\n([^]*?)<!-- end generated -->)");
+	for (auto it = std::sregex_iterator(doc.begin(), doc.end(), block);
+	     it != std::sregex_iterator(); ++it)
+		blocks[(*it)[1].str()] = (*it)[2].str();
+	return blocks;
 }
 
-TEST_F(ConfigTest, TheDocumentedKeysAreTheReadersKeys)
+TEST(ConfigDoc, TheKeyTablesAreGeneratedFromTheReadersTables)
 {
-	std::map<std::string, std::string> backends;
-	const auto documented = documentedKeys(
-		readText(fs::path(DOCKPOSE_SOURCE_DIR) / "docs" / "configuration.md"), &backends);
-	ASSERT_EQ(documented.size(), 8u) << "sections found in docs/configuration.md";
-	for (const auto &[section, doc_keys] : documented) {
+	const auto blocks = generatedBlocks(
+		readText(fs::path(DOCKPOSE_SOURCE_DIR) / "docs" / "configuration.md"));
+	const std::vector<std::string> sections = config_table::docSections();
+	ASSERT_EQ(sections.size(), 8u);
+	const char *how = "\ndocs/configuration.md is out of date: build dockposed, run "
+			  "scripts/update-config-doc and commit the result";
+	for (const std::string &section : sections) {
 		SCOPED_TRACE("section \"" + section + "\"");
-		/* Provoke the reader's list of its known keys for this section. */
+		const auto it = blocks.find(section);
+		ASSERT_NE(it, blocks.end()) << "no <!-- generated: dockposed --print-config-doc "
+					    << section << " --> block" << how;
+		EXPECT_EQ(it->second, config_table::docTable(section)) << how;
+	}
+	for (const auto &[section, text] : blocks)
+		EXPECT_NE(std::find(sections.begin(), sections.end(), section), sections.end())
+			<< "docs/configuration.md has a block for \"" << section
+			<< "\", which is no section" << how;
+}
+
+/* The reader knows (its "unknown key" message lists them) exactly the keys its table prints. */
+TEST_F(ConfigTest, TheReadersKeysAreTheTablesKeys)
+{
+	for (const std::string &section : config_table::docSections()) {
+		SCOPED_TRACE("section \"" + section + "\"");
+		std::vector<std::string> table_keys;
+		std::istringstream rows(config_table::docTable(section));
+		for (std::string row; std::getline(rows, row);)
+			if (row.rfind("| `", 0) == 0)
+				table_keys.push_back(row.substr(3, row.find('`', 3) - 3));
+
 		json doc = baseConfig();
 		json *at = &doc;
-		std::istringstream path(section);
+		std::istringstream path(section == "top" ? "" : section);
 		for (std::string part; std::getline(path, part, '.');)
 			at = &(*at)[part];
 		(*at)["zzzz_not_a_key"] = 1;
@@ -828,27 +820,32 @@ TEST_F(ConfigTest, TheDocumentedKeysAreTheReadersKeys)
 		const std::string &e = r.errors[0];
 		const std::size_t from = e.find("known keys: ");
 		ASSERT_NE(from, std::string::npos) << e;
-		std::set<std::string> reader_keys;
+		std::vector<std::string> reader_keys;
 		std::istringstream list(e.substr(from + 12, e.rfind(')') - from - 12));
 		for (std::string k; std::getline(list, k, ',');)
-			reader_keys.insert(k.substr(k.find_first_not_of(' ')));
-		EXPECT_EQ(reader_keys, doc_keys);
+			reader_keys.push_back(k.substr(k.find_first_not_of(' ')));
+		EXPECT_EQ(reader_keys, table_keys);
 	}
-	const std::pair<const char *, board::BackendKind> kinds[] = {
-		{ "camera", board::BackendKind::Camera },
-		{ "strobe", board::BackendKind::Strobe },
-		{ "can", board::BackendKind::Can },
+}
+
+/* Every board mode is the protocol's mode of the same meaning (firmware/modes.h). */
+TEST(Modes, TheBoardsAreTheProtocols)
+{
+	const auto upper = [](std::string s) {
+		for (char &c : s)
+			c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+		return s;
 	};
-	for (const auto &[section, kind] : kinds) {
-		std::set<std::string> built, doc_names;
-		for (const char *name : board::backendNames(kind))
-			built.insert(name);
-		const std::string &cell = backends[section];
-		const std::regex name_re("`([a-z]+)`");
-		for (auto it = std::sregex_iterator(cell.begin(), cell.end(), name_re);
-		     it != std::sregex_iterator(); ++it)
-			doc_names.insert((*it)[1].str());
-		EXPECT_EQ(doc_names, built) << section << ".backend in docs/configuration.md";
+	for (std::size_t i = 0; i < board::kStrobeModeNames.size(); ++i) {
+		const auto mode = static_cast<StrobeMode>(i);
+		EXPECT_EQ(upper(strobeModeName(mode)), can::strobeModeName(toCan(mode)));
+		EXPECT_EQ(fromCan(toCan(mode)), mode);
+	}
+	EXPECT_EQ(fromCan(can::StrobeMode::Unchanged), std::nullopt);
+	for (std::size_t i = 0; i < board::kTrackModeNames.size(); ++i) {
+		const auto mode = static_cast<TrackMode>(i);
+		EXPECT_EQ(upper(board::kTrackModeNames[i]), can::trackModeName(toCan(mode)));
+		EXPECT_EQ(fromCan(toCan(mode)), mode);
 	}
 }
 
