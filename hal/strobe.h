@@ -21,6 +21,7 @@
 #include <string>
 #include <thread>
 
+#include "hal/ring_buffer.h"
 #include "hal/status.h"
 
 namespace dockpose::hal {
@@ -144,8 +145,7 @@ private:
 	std::int64_t retry_ns_ = 0; /* after a failed set, no new attempt before this */
 	std::array<Pulse, kMaxPulses> pulses_{};
 	int pulse_count_ = 0;
-	std::array<Switch, kHistory> history_{};
-	std::uint64_t history_count_ = 0;
+	RingBuffer<Switch, kHistory> history_; /* oldest first; a full history drops its oldest */
 	std::int64_t last_kick_ns_ = 0;
 	std::array<char, 160> last_error_{};
 

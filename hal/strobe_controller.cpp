@@ -178,9 +178,9 @@ Lighting StrobeController::lighting(std::int64_t start_ns, std::int64_t end_ns) 
 	if (end_ns > monotonicNs())
 		return Lighting::Mixed;
 
-	std::uint64_t n = std::min<std::uint64_t>(history_count_, kHistory);
-	for (std::uint64_t i = 0; i < n; i++) {
-		const Switch &s = history_[(history_count_ - 1 - i) % kHistory];
+	const std::size_t n = history_.size();
+	for (std::size_t i = 0; i < n; i++) {
+		const Switch &s = history_[n - 1 - i];
 		if (s.before_ns <= end_ns && s.after_ns >= start_ns)
 			return Lighting::Mixed;
 		if (s.after_ns < start_ns) {
@@ -293,8 +293,7 @@ void StrobeController::drive(bool on, bool force)
 		if (!was_known || was_on != on) {
 			if (was_known)
 				switches_.fetch_add(1, std::memory_order_relaxed);
-			history_[history_count_ % kHistory] = { before_ns, after_ns, on, true };
-			history_count_++;
+			history_.push({ before_ns, after_ns, on, true });
 		}
 		return;
 	}
@@ -309,8 +308,7 @@ void StrobeController::drive(bool on, bool force)
 	retry_ns_ = after_ns + kRetryNs;
 	/* One unknown entry until the next success: a run of failures adds nothing. */
 	if (was_known) {
-		history_[history_count_ % kHistory] = { before_ns, after_ns, false, false };
-		history_count_++;
+		history_.push({ before_ns, after_ns, false, false });
 	}
 }
 

@@ -17,14 +17,13 @@ static_assert(std::atomic<std::int64_t>::is_always_lock_free &&
 	      "forceOff() needs lock-free atomics to be async-signal-safe");
 
 RecordingStrobe::RecordingStrobe()
-	: ring_(kCapacity, Event{ 0, false })
+	: ring_(std::make_unique<RingBuffer<Event, kCapacity>>())
 {
 }
 
 void RecordingStrobe::record(std::int64_t time_ns, bool on)
 {
-	ring_[count_ % kCapacity] = Event{ time_ns, on };
-	++count_;
+	ring_->push(Event{ time_ns, on });
 	recorded_on_ = on;
 }
 
@@ -91,11 +90,10 @@ void RecordingStrobe::close()
 std::vector<RecordingStrobe::Event> RecordingStrobe::events() const
 {
 	std::lock_guard<std::mutex> lock(mutex_);
-	const std::uint64_t kept = count_ < kCapacity ? count_ : kCapacity;
 	std::vector<Event> out;
-	out.reserve(static_cast<std::size_t>(kept) + 1);
-	for (std::uint64_t i = count_ - kept; i < count_; ++i)
-		out.push_back(ring_[i % kCapacity]);
+	out.reserve(ring_->size() + 1);
+	for (std::size_t i = 0; i < ring_->size(); ++i)
+		out.push_back((*ring_)[i]);
 	/* A forceOff() not yet absorbed by a later call. */
 	if (force_off_count_.load() != force_off_seen_ && recorded_on_)
 		out.push_back(Event{ force_off_ns_.load(), false });
@@ -105,7 +103,9 @@ std::vector<RecordingStrobe::Event> RecordingStrobe::events() const
 std::uint64_t RecordingStrobe::eventCount() const
 {
 	std::lock_guard<std::mutex> lock(mutex_);
-	return count_ + (force_off_count_.load() != force_off_seen_ && recorded_on_ ? 1 : 0);
+	/* Every event recorded: those kept and those the ring dropped. */
+	return ring_->size() + ring_->dropped() +
+	       (force_off_count_.load() != force_off_seen_ && recorded_on_ ? 1 : 0);
 }
 
 void RecordingStrobe::failNextSet(std::string message)

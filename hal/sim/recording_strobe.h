@@ -6,8 +6,9 @@
  *
  * Recording: set(), open() and close() record an event when the level
  * changes (set(true) on a lit LED records nothing). The most recent
- * kCapacity events are kept (a ring allocated in the constructor, so a
- * long-running demo does not grow); eventCount() counts them all.
+ * kCapacity events are kept (a hal::RingBuffer allocated in the constructor,
+ * so a long-running demo does not grow and the strobe stays small on a
+ * stack); eventCount() counts them all.
  *
  * forceOff() is async-signal-safe: it only stores atomics (the LED level,
  * the time of the call from clock_gettime, and a counter); it takes no lock,
@@ -29,10 +30,12 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
 
+#include "hal/ring_buffer.h"
 #include "hal/strobe.h"
 
 namespace dockpose::hal {
@@ -76,8 +79,7 @@ private:
 	void change(bool on); /* mutex_ held */
 
 	mutable std::mutex mutex_;
-	std::vector<Event> ring_;
-	std::uint64_t count_ = 0;
+	std::unique_ptr<RingBuffer<Event, kCapacity>> ring_; /* the most recent events */
 	bool recorded_on_ = false; /* level of the last recorded event */
 	bool open_ = false;
 	bool fail_next_ = false;
