@@ -2,14 +2,12 @@
 /*
  * Counting allocation hooks for the zero-allocation proofs (tests/algo/test_no_alloc,
  * tests/firmware/test_daemon_no_alloc): replacement global operator new / delete and an
- * interposed malloc / calloc / realloc that count calls while armed, in every thread.
+ * interposed malloc / calloc / realloc (tests/common/allocation_hooks.h) that count calls
+ * while armed, in every thread.
  *
  * Defines the replacement functions: include it in exactly one file of a test executable.
  */
 #pragma once
-
-/* The replacement operator delete frees what the replacement operator new took from malloc. */
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 
 #include <atomic>
 #include <cstdlib>
@@ -42,75 +40,10 @@ inline long disarmAllocationCounter()
 
 } /* namespace dockpose::test */
 
-extern "C" void *__libc_malloc(std::size_t);
+#include "allocation_hooks.h"
 
-/* Counting hooks: operator new and friends take memory from the C library directly. */
-void *operator new(std::size_t n)
+/* What the hooks count: every allocation in every thread, while armed. */
+void dockpose::test::onAllocation()
 {
-	dockpose::test::countAllocation();
-	if (void *p = __libc_malloc(n ? n : 1))
-		return p;
-	throw std::bad_alloc();
-}
-void *operator new[](std::size_t n)
-{
-	dockpose::test::countAllocation();
-	if (void *p = __libc_malloc(n ? n : 1))
-		return p;
-	throw std::bad_alloc();
-}
-void *operator new(std::size_t n, std::align_val_t a)
-{
-	dockpose::test::countAllocation();
-	if (void *p = std::aligned_alloc(static_cast<std::size_t>(a),
-					 (n + static_cast<std::size_t>(a) - 1) &
-						 ~(static_cast<std::size_t>(a) - 1)))
-		return p;
-	throw std::bad_alloc();
-}
-void operator delete(void *p) noexcept
-{
-	std::free(p);
-}
-void operator delete[](void *p) noexcept
-{
-	std::free(p);
-}
-void operator delete(void *p, std::size_t) noexcept
-{
-	std::free(p);
-}
-void operator delete[](void *p, std::size_t) noexcept
-{
-	std::free(p);
-}
-void operator delete(void *p, std::align_val_t) noexcept
-{
-	std::free(p);
-}
-void operator delete(void *p, std::size_t, std::align_val_t) noexcept
-{
-	std::free(p);
-}
-
-/* malloc family: interpose and forward to the C library's implementation. */
-extern "C" {
-extern void *__libc_calloc(std::size_t, std::size_t);
-extern void *__libc_realloc(void *, std::size_t);
-
-void *malloc(std::size_t n)
-{
-	dockpose::test::countAllocation();
-	return __libc_malloc(n);
-}
-void *calloc(std::size_t n, std::size_t m)
-{
-	dockpose::test::countAllocation();
-	return __libc_calloc(n, m);
-}
-void *realloc(void *p, std::size_t n)
-{
-	dockpose::test::countAllocation();
-	return __libc_realloc(p, n);
-}
+	countAllocation();
 }

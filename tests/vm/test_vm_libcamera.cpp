@@ -57,9 +57,6 @@
 #include "hal/libcamera/libcamera_camera.h"
 #include "vm_shell.h"
 
-/* The replacement operator delete frees what the replacement operator new took from malloc. */
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-
 /* -------------------------------------------------------------------------- */
 /* Attributed allocation counting: armed per thread.                          */
 
@@ -180,83 +177,13 @@ std::string exampleStack(Caller c)
 } /* namespace */
 
 #ifndef DOCKPOSE_VM_NO_ALLOC_HOOKS
-extern "C" void *__libc_malloc(std::size_t);
-extern "C" void *__libc_calloc(std::size_t, std::size_t);
-extern "C" void *__libc_realloc(void *, std::size_t);
+#define DOCKPOSE_ALLOC_HOOK DOCKPOSE_HOOK
+#include "../common/allocation_hooks.h"
 
-DOCKPOSE_HOOK void *operator new(std::size_t n)
+/* What the hooks count: this thread's allocations while armed, by caller. */
+DOCKPOSE_HOOK void dockpose::test::onAllocation()
 {
 	countAllocation();
-	if (void *p = __libc_malloc(n ? n : 1))
-		return p;
-	throw std::bad_alloc();
-}
-DOCKPOSE_HOOK void *operator new[](std::size_t n)
-{
-	countAllocation();
-	if (void *p = __libc_malloc(n ? n : 1))
-		return p;
-	throw std::bad_alloc();
-}
-DOCKPOSE_HOOK void *operator new(std::size_t n, const std::nothrow_t &) noexcept
-{
-	countAllocation();
-	return __libc_malloc(n ? n : 1);
-}
-DOCKPOSE_HOOK void *operator new[](std::size_t n, const std::nothrow_t &) noexcept
-{
-	countAllocation();
-	return __libc_malloc(n ? n : 1);
-}
-DOCKPOSE_HOOK void *operator new(std::size_t n, std::align_val_t a)
-{
-	countAllocation();
-	const auto align = static_cast<std::size_t>(a);
-	if (void *p = std::aligned_alloc(align, (n + align - 1) & ~(align - 1)))
-		return p;
-	throw std::bad_alloc();
-}
-void operator delete(void *p) noexcept
-{
-	std::free(p);
-}
-void operator delete[](void *p) noexcept
-{
-	std::free(p);
-}
-void operator delete(void *p, std::size_t) noexcept
-{
-	std::free(p);
-}
-void operator delete[](void *p, std::size_t) noexcept
-{
-	std::free(p);
-}
-void operator delete(void *p, std::align_val_t) noexcept
-{
-	std::free(p);
-}
-void operator delete(void *p, std::size_t, std::align_val_t) noexcept
-{
-	std::free(p);
-}
-
-extern "C" {
-DOCKPOSE_HOOK void *malloc(std::size_t n)
-{
-	countAllocation();
-	return __libc_malloc(n);
-}
-DOCKPOSE_HOOK void *calloc(std::size_t n, std::size_t m)
-{
-	countAllocation();
-	return __libc_calloc(n, m);
-}
-DOCKPOSE_HOOK void *realloc(void *p, std::size_t n)
-{
-	countAllocation();
-	return __libc_realloc(p, n);
-}
 }
 #endif /* DOCKPOSE_VM_NO_ALLOC_HOOKS */
 
