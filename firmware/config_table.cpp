@@ -449,7 +449,7 @@ std::string typeText(const Field<S> &f)
 	case Kind::Pose:
 		return "array of 6 numbers";
 	case Kind::CanId:
-		return "integer, or string `\"0x300\"` (hex) or `\"768\"`";
+		return R"(integer, or string `"0x300"` (hex) or `"768"`)";
 	case Kind::Object:
 		return "object";
 	}

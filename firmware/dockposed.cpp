@@ -9,7 +9,8 @@
  * failed for good), 2 for a bad command line or board file, 75 (EX_TEMPFAIL)
  * when start-up did not finish within --startup-timeout seconds (a backend
  * blocked: a device that never answers, a FIFO with no reader as the CAN log,
- * a library that deadlocked); stderr names the step. systemd restarts it
+ * a library that deadlocked); stderr names the step; 70 (EX_SOFTWARE) when an
+ * exception escaped (a bug, or out of memory), with its message. systemd restarts it
  * (Restart=on-failure) before its own TimeoutStartSec would kill it.
  */
 #include <unistd.h>
@@ -18,6 +19,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -41,6 +43,7 @@ dockpose::hal::Strobe *g_strobe = nullptr;
 constexpr int kExitStartupHung = 75;
 std::atomic<const char *> g_startup_step{ "start-up" };
 constexpr int kDefaultStartupTimeoutS = 20;
+constexpr int kExitInternal = 70; /* EX_SOFTWARE: an exception escaped */
 char g_startup_head[96] = "";
 char g_startup_tail[48] = "";
 
@@ -131,9 +134,8 @@ std::string join(std::span<const char *const> names)
 	return out;
 }
 
-} /* namespace */
-
-int main(int argc, char **argv)
+/* The daemon itself; main() turns an exception that escapes it into exit 70. */
+int run(int argc, char **argv)
 {
 	using namespace dockpose;
 
@@ -244,18 +246,36 @@ int main(int argc, char **argv)
 
 	installSignalHandlers();
 	firmware::Daemon daemon(config, std::move(wired));
-	g_strobe = daemon.strobe();
+	/* The signal handlers' strobe while the daemon lives; cleared before it is destroyed,
+	 * however run() is left. */
+	const struct StrobeForSignals {
+		explicit StrobeForSignals(hal::Strobe *strobe) { g_strobe = strobe; }
+		~StrobeForSignals() { g_strobe = nullptr; }
+		StrobeForSignals(const StrobeForSignals &) = delete;
+		StrobeForSignals &operator=(const StrobeForSignals &) = delete;
+	} strobe_for_signals(daemon.strobe());
 	g_startup_step.store("starting the camera, strobe and CAN");
 	if (auto s = daemon.start(); !s) {
 		::alarm(0);
 		std::fprintf(stderr, "dockposed: cannot start: %s\n", s.message().c_str());
 		daemon.shutdown();
-		g_strobe = nullptr;
 		return 1;
 	}
 	::alarm(0);
 	const int status = daemon.run(g_stop, run_for_s);
 	daemon.printSummary(stderr);
-	g_strobe = nullptr;
 	return status;
+}
+
+} /* namespace */
+
+int main(int argc, char **argv)
+{
+	try {
+		return run(argc, argv);
+	} catch (const std::exception &e) {
+		/* The Daemon was destroyed on the way here (its strobe off, its threads joined). */
+		std::fprintf(stderr, "dockposed: internal error: %s\n", e.what());
+		return kExitInternal;
+	}
 }
