@@ -469,6 +469,12 @@ std::string defaultText(const Field<S> &f)
 			using M = decltype(member);
 			if constexpr (std::is_same_v<M, std::monostate>) {
 				return "";
+			} else if constexpr (sizeof(std::remove_cvref_t<decltype(defaults.*member)>) >
+					     sizeof(S)) {
+				/* No member of S has this type: it would not fit. (The visit
+				 * instantiates every alternative; GCC's -Warray-bounds flags
+				 * reading one wider than S, e.g. an int of SystemdSection.) */
+				return "";
 			} else {
 				const auto &v = defaults.*member;
 				using V = std::remove_cvref_t<decltype(v)>;

@@ -299,9 +299,8 @@ void solveProcessVsInProcess(benchmark::State &state)
 			const FrameSet set(s, "one", 1);
 			one = solveProcess(set, 1);
 		}
-		if (!tool.message().empty() || !one.message().empty()) {
-			state.SkipWithError(
-				(tool.message().empty() ? one.message() : tool.message()).c_str());
+		if (!tool.error.empty() || !one.error.empty()) {
+			state.SkipWithError((tool.error.empty() ? one.error : tool.error).c_str());
 			return;
 		}
 		state.SetIterationTime(tool.seconds);
