@@ -17,6 +17,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -65,8 +66,11 @@ enum class CanState : std::uint8_t {
 
 const char *canStateName(CanState state);
 
+/* The deepest transmit queue a bus takes (can.tx_queue_depth's upper bound). */
+constexpr std::size_t kMaxCanTxQueueDepth = 4096;
+
 struct CanOptions {
-	int tx_queue_depth = 32; /* frames; at least 1 */
+	int tx_queue_depth = 32; /* frames; 1 .. kMaxCanTxQueueDepth */
 	bool fd = false; /* enable CAN FD on the socket */
 };
 

@@ -11,7 +11,6 @@
 #include <system_error>
 #include <utility>
 
-#include "hal/clock.h"
 #include "hal/sim/sim_can.h"
 
 namespace dockpose::hal {
@@ -25,7 +24,8 @@ constexpr char kHex[] = "0123456789ABCDEF";
 } /* namespace */
 
 FileCanBus::FileCanBus(std::string path, std::string interface_name)
-	: path_(std::move(path)),
+	: CanBusBase("file CAN bus " + interface_name + " (" + path + ")"),
+	  path_(std::move(path)),
 	  interface_(std::move(interface_name))
 {
 }
@@ -35,88 +35,62 @@ FileCanBus::~FileCanBus()
 	close();
 }
 
-std::string FileCanBus::name() const
+void FileCanBus::writeFailed(int err)
 {
-	return "file CAN bus " + interface_ + " (" + path_ + ")";
+	++stats_.tx_errors;
+	setError("%s: cannot write the CAN log: %s", path_.c_str(), std::strerror(err));
 }
 
-void FileCanBus::setError(const char *what, int err)
+Status FileCanBus::fail(const std::string &message)
 {
-	std::snprintf(error_, sizeof(error_), "%s: %s%s%s", path_.c_str(), what, err ? ": " : "",
-		      err ? std::strerror(err) : "");
+	setError("%s", message.c_str());
+	publish();
+	return Status::error(message);
 }
 
 Status FileCanBus::open(std::span<const CanFilter> filters, const CanOptions &options)
 {
 	close();
-	auto failed = [&](const std::string &message) {
-		std::snprintf(error_, sizeof(error_), "%s", message.c_str());
-		return Status::error(message);
-	};
+	if (Status s = openQueues(options, kRxCapacity); !s.isOk())
+		return s;
 	if (interface_.empty() || interface_.size() > kMaxInterfaceName ||
 	    interface_.find_first_of(" \t\r\n#()") != std::string::npos)
-		return failed("file CAN bus: invalid interface name \"" + interface_ +
-			      "\" (1 to 32 characters, no spaces, '#' or parentheses)");
-	if (options.tx_queue_depth < 1)
-		return failed(name() + ": tx_queue_depth " +
-			      std::to_string(options.tx_queue_depth) + " must be at least 1");
+		return fail("file CAN bus: invalid interface name \"" + interface_ +
+			    "\" (1 to 32 characters, no spaces, '#' or parentheses)");
 	if (path_.empty())
-		return failed("file CAN bus: no log file path given");
+		return fail("file CAN bus: no log file path given");
 
 	std::error_code ec;
 	const std::filesystem::path parent = std::filesystem::path(path_).parent_path();
 	if (!parent.empty() && !std::filesystem::is_directory(parent, ec))
-		return failed(path_ + ": cannot create the CAN log: the folder " + parent.string() +
-			      " does not exist");
+		return fail(path_ + ": cannot create the CAN log: the folder " + parent.string() +
+			    " does not exist");
 	std::FILE *file = std::fopen(path_.c_str(), "w");
 	if (!file) {
 		const int err = errno;
-		return failed(path_ + ": cannot create the CAN log: " + std::strerror(err));
+		return fail(path_ + ": cannot create the CAN log: " + std::strerror(err));
 	}
 	file_buffer_.assign(kFileBufferBytes, '\0');
 	std::setvbuf(file, file_buffer_.data(), _IOFBF, file_buffer_.size());
 	file_ = file;
-	options_ = options;
-	tx_.reset(options.tx_queue_depth);
 	budget_ = frames_per_poll_;
 	{
-		std::lock_guard<std::mutex> lock(rx_mutex_);
+		std::lock_guard<std::mutex> lock(filter_mutex_);
 		filters_.assign(filters.begin(), filters.end());
-		rx_ring_.assign(kRxCapacity, CanFrame{});
-		rx_head_ = 0;
-		rx_count_ = 0;
-		rx_open_ = true;
 	}
-	error_[0] = '\0';
-	publishQueue();
-	state_.store(CanState::ErrorActive);
+	markOpen();
 	return Status::ok();
 }
 
 void FileCanBus::close()
 {
-	{
-		std::lock_guard<std::mutex> lock(rx_mutex_);
-		rx_open_ = false;
-		rx_count_ = 0;
-	}
 	if (file_) {
-		if (std::fflush(file_) != 0) {
-			setError("cannot write the CAN log", errno);
-			tx_errors_.fetch_add(1, std::memory_order_relaxed);
-		}
+		if (std::fflush(file_) != 0)
+			writeFailed(errno);
 		std::fclose(file_);
 		file_ = nullptr;
 	}
-	tx_.clear();
-	publishQueue();
-	state_.store(CanState::Closed);
-}
-
-void FileCanBus::publishQueue()
-{
-	tx_queued_.store(static_cast<std::uint32_t>(tx_.size()), std::memory_order_relaxed);
-	tx_dropped_.store(tx_.dropped(), std::memory_order_relaxed);
+	closeQueues();
 }
 
 bool FileCanBus::writeFrame(const CanFrame &frame)
@@ -144,39 +118,17 @@ bool FileCanBus::writeFrame(const CanFrame &frame)
 	return std::fwrite(line, 1, len, file_) == len;
 }
 
-void FileCanBus::pump()
+void FileCanBus::transmit()
 {
 	while (!tx_.empty() && budget_ != 0) {
-		if (writeFrame(tx_.front())) {
-			tx_frames_.fetch_add(1, std::memory_order_relaxed);
-		} else {
-			tx_errors_.fetch_add(1, std::memory_order_relaxed);
-			setError("cannot write the CAN log", errno);
-		}
+		if (writeFrame(tx_.front()))
+			++stats_.tx_frames;
+		else
+			writeFailed(errno);
 		tx_.pop();
 		if (budget_ > 0)
 			--budget_;
 	}
-	publishQueue();
-}
-
-bool FileCanBus::send(const CanFrame &frame)
-{
-	if (!file_) {
-		tx_errors_.fetch_add(1, std::memory_order_relaxed);
-		setError("send() on a closed bus", 0);
-		return false;
-	}
-	if (const char *problem = canFrameProblem(frame, options_.fd)) {
-		tx_errors_.fetch_add(1, std::memory_order_relaxed);
-		setError(problem, 0);
-		return false;
-	}
-	CanFrame queued = canWireFrame(frame);
-	queued.timestamp_ns = monotonicNs();
-	const bool kept = tx_.push(queued);
-	pump();
-	return kept;
 }
 
 void FileCanBus::poll()
@@ -184,11 +136,10 @@ void FileCanBus::poll()
 	if (!file_)
 		return;
 	budget_ = frames_per_poll_;
-	pump();
-	if (std::fflush(file_) != 0) {
-		tx_errors_.fetch_add(1, std::memory_order_relaxed);
-		setError("cannot write the CAN log", errno);
-	}
+	transmit();
+	if (std::fflush(file_) != 0)
+		writeFailed(errno);
+	publish();
 }
 
 void FileCanBus::setBandwidth(int frames_per_poll)
@@ -199,48 +150,12 @@ void FileCanBus::setBandwidth(int frames_per_poll)
 
 void FileCanBus::inject(const CanFrame &frame)
 {
-	std::lock_guard<std::mutex> lock(rx_mutex_);
-	if (!rx_open_ || !canFilterPasses(filters_, frame))
-		return;
-	if (rx_count_ == rx_ring_.size()) {
-		rx_head_ = (rx_head_ + 1) % rx_ring_.size();
-		--rx_count_;
-		rx_dropped_.fetch_add(1, std::memory_order_relaxed);
+	{
+		std::lock_guard<std::mutex> lock(filter_mutex_);
+		if (!canFilterPasses(filters_, frame))
+			return;
 	}
-	CanFrame &slot = rx_ring_[(rx_head_ + rx_count_) % rx_ring_.size()];
-	slot = frame;
-	if (slot.timestamp_ns == 0)
-		slot.timestamp_ns = monotonicNs();
-	++rx_count_;
-}
-
-bool FileCanBus::receive(CanFrame *frame)
-{
-	std::lock_guard<std::mutex> lock(rx_mutex_);
-	if (rx_count_ == 0 || !frame)
-		return false;
-	*frame = rx_ring_[rx_head_];
-	rx_head_ = (rx_head_ + 1) % rx_ring_.size();
-	--rx_count_;
-	rx_frames_.fetch_add(1, std::memory_order_relaxed);
-	return true;
-}
-
-CanStats FileCanBus::stats() const
-{
-	CanStats s;
-	s.tx_frames = tx_frames_.load(std::memory_order_relaxed);
-	s.tx_dropped = tx_dropped_.load(std::memory_order_relaxed);
-	s.tx_errors = tx_errors_.load(std::memory_order_relaxed);
-	s.rx_frames = rx_frames_.load(std::memory_order_relaxed);
-	s.tx_queued = tx_queued_.load(std::memory_order_relaxed);
-	s.state = state_.load(std::memory_order_relaxed);
-	return s;
-}
-
-std::string FileCanBus::lastError() const
-{
-	return error_;
+	received(frame);
 }
 
 } /* namespace dockpose::hal */

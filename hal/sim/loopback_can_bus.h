@@ -5,8 +5,8 @@
  * endpoint of the hub whose filters pass it (sim_can.h), and recorded in the
  * hub's traffic, in the order frames crossed the bus.
  *
- * Each endpoint sends through its own hal::CanTxQueue (depth
- * CanOptions::tx_queue_depth): send() and poll() move its queued frames
+ * Each endpoint is a CanBusBase (its transmit queue CanOptions::tx_queue_depth
+ * deep, its receive ring, its statistics): send() and poll() move its queued frames
  * across the bus at once, unless the hub is blocked (setBlocked: a stuck bus,
  * arbitration always lost) or bus-off (setBusOff): then frames wait, and a
  * full queue drops its oldest frame (counted in tx_dropped). Each endpoint
@@ -19,8 +19,8 @@
  *
  * Threads: endpoints may live on different threads (the hub's mutex guards
  * the crossing); each endpoint is owned by one thread as CanBus says; the
- * hub's calls are safe from any thread. Allocates: the hub's constructor (the
- * traffic ring), open() (queues, filters); send(), poll(), receive() never.
+ * hub's calls are safe from any thread. Allocates: the constructors, open()
+ * (the filters), traffic() (its copy); send(), poll(), receive() never.
  */
 #pragma once
 
@@ -32,8 +32,8 @@
 #include <string>
 #include <vector>
 
-#include "hal/can_bus.h"
-#include "hal/can_tx_queue.h"
+#include "hal/can_bus_base.h"
+#include "hal/ring_buffer.h"
 
 namespace dockpose::hal {
 
@@ -67,8 +67,7 @@ private:
 
 	mutable std::mutex mutex_;
 	std::vector<LoopbackCanBus *> endpoints_;
-	std::vector<CanFrame> traffic_;
-	std::uint64_t traffic_count_ = 0;
+	RingBuffer<CanFrame, kTrafficCapacity> traffic_;
 	bool blocked_ = false;
 	bool bus_off_ = false;
 	std::atomic<bool> bus_off_now_{ false };
@@ -76,59 +75,34 @@ private:
 	std::atomic<std::uint64_t> restarts_{ 0 };
 };
 
-class LoopbackCanBus : public CanBus
+class LoopbackCanBus : public CanBusBase
 {
 public:
-	static constexpr std::size_t kRxCapacity = 256;
+	static constexpr std::size_t kRxCapacity = kMaxRxDepth;
 
 	LoopbackCanBus(std::shared_ptr<LoopbackHub> hub, std::string name = "loop0");
 	~LoopbackCanBus() override;
 
-	std::string name() const override;
 	Status open(std::span<const CanFilter> filters, const CanOptions &options) override;
 	void close() override;
-
-	bool send(const CanFrame &frame) override;
 	void poll() override;
-	bool receive(CanFrame *frame) override;
 
+	/* CanBusBase's, with the hub's bus-off state and its events since open(). */
 	CanStats stats() const override;
-	std::string lastError() const override;
-
-	/* Frames dropped from this endpoint's full receive queue. */
-	std::uint64_t rxDropped() const { return rx_dropped_.load(std::memory_order_relaxed); }
 
 private:
 	friend class LoopbackHub;
 
-	void pump();
+	void transmit() override;
 	void deliver(const CanFrame &frame); /* hub mutex held */
-	void publishQueue();
 
 	std::shared_ptr<LoopbackHub> hub_;
-	std::string name_;
 
-	bool open_ = false;
-	bool fd_ = false;
-	CanTxQueue tx_;
-	const char *error_ = "";
-	std::string open_error_;
-
-	/* Receive side: guarded by the hub's mutex. */
+	/* Guarded by the hub's mutex. */
 	std::vector<CanFilter> filters_;
-	std::vector<CanFrame> rx_ring_;
-	std::size_t rx_head_ = 0;
-	std::size_t rx_count_ = 0;
 
 	std::atomic<std::uint64_t> bus_off_base_{ 0 };
 	std::atomic<std::uint64_t> restarts_base_{ 0 };
-	std::atomic<bool> stats_open_{ false };
-	std::atomic<std::uint64_t> tx_frames_{ 0 };
-	std::atomic<std::uint64_t> tx_dropped_{ 0 };
-	std::atomic<std::uint64_t> tx_errors_{ 0 };
-	std::atomic<std::uint64_t> rx_frames_{ 0 };
-	std::atomic<std::uint64_t> rx_dropped_{ 0 };
-	std::atomic<std::uint32_t> tx_queued_{ 0 };
 };
 
 } /* namespace dockpose::hal */

@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * SocketCanBus: a raw CAN socket behind the CanTxQueue (see socketcan_bus.h).
+ * SocketCanBus: a raw CAN socket behind CanBusBase's queues (see socketcan_bus.h).
  */
 #include "hal/socketcan/socketcan_bus.h"
 
@@ -251,7 +251,8 @@ SocketCanBus::SocketCanBus(std::string interface, int bitrate)
 }
 
 SocketCanBus::SocketCanBus(std::string interface, std::unique_ptr<SocketCanIo> io, int bitrate)
-	: interface_(std::move(interface)),
+	: CanBusBase("socketcan:" + interface),
+	  interface_(std::move(interface)),
 	  bitrate_(bitrate),
 	  io_(std::move(io))
 {
@@ -262,17 +263,12 @@ SocketCanBus::~SocketCanBus()
 	close();
 }
 
-std::string SocketCanBus::name() const
-{
-	return "socketcan:" + interface_;
-}
-
 SocketCanOpenRequest SocketCanBus::request() const
 {
 	SocketCanOpenRequest r;
 	r.interface = interface_.c_str();
 	r.filters = kernel_filters_;
-	r.fd = fd_;
+	r.fd = fdEnabled();
 	r.bitrate = bitrate_;
 	return r;
 }
@@ -280,83 +276,48 @@ SocketCanOpenRequest SocketCanBus::request() const
 Status SocketCanBus::open(std::span<const CanFilter> filters, const CanOptions &options)
 {
 	close();
-
-	stats_ = CanStats{};
-	rx_dropped_ = 0;
-	closed_dropped_ = 0;
 	kernel_drops_ = 0;
-	error_[0] = '\0';
+	if (Status s = openQueues(options, kRxRingFrames); !s.isOk())
+		return s;
 
-	if (!socketcan::validInterfaceName(interface_))
+	bool valid = true;
+	if (!socketcan::validInterfaceName(interface_)) {
 		setError("can: \"%s\" is not a valid interface name "
 			 "(1 to %d characters, no '/', ':' or spaces)",
 			 interface_.c_str(), IFNAMSIZ - 1);
-	else if (options.tx_queue_depth < 1)
-		setError("can: tx_queue_depth %d must be at least 1", options.tx_queue_depth);
-	else if (filters.size() > CAN_RAW_FILTER_MAX)
+		valid = false;
+	} else if (filters.size() > CAN_RAW_FILTER_MAX) {
 		setError("can: %zu filters, the kernel takes at most %d", filters.size(),
 			 CAN_RAW_FILTER_MAX);
-	if (error_[0] != '\0') {
+		valid = false;
+	}
+	if (!valid) {
 		publish();
-		return Status::error(error_.data());
+		return Status::error(lastError());
 	}
 
-	fd_ = options.fd;
 	kernel_filters_.clear();
 	kernel_filters_.reserve(filters.size());
 	for (const CanFilter &f : filters)
 		kernel_filters_.push_back(socketcan::toKernelFilter(f));
-	tx_queue_.reset(options.tx_queue_depth);
-	rx_ring_.reset(kRxRingFrames);
 
-	if (!io_->open(request(), true, error_)) {
+	if (!io_->open(request(), true, errorBuffer())) {
 		publish();
-		return Status::error(error_.data());
+		return Status::error(lastError());
 	}
-
-	opened_ = true;
-	stats_.state = CanState::ErrorActive;
-	publish();
+	markOpen();
 	return Status::ok();
 }
 
 void SocketCanBus::close()
 {
 	io_->close();
-	opened_ = false;
-	tx_queue_.clear();
-	rx_ring_.clear();
-	stats_.state = CanState::Closed;
-	publish();
-}
-
-bool SocketCanBus::send(const CanFrame &frame)
-{
-	if (!opened_) {
-		++closed_dropped_;
-		setError("can: send on %s while it is closed; frame 0x%x dropped",
-			 interface_.c_str(), frame.id);
-		publish();
-		return false;
-	}
-	if (const char *problem = canFrameProblem(frame, fd_)) {
-		++stats_.tx_errors;
-		setError("can: frame 0x%x not sent on %s: %s", frame.id, interface_.c_str(),
-			 problem);
-		publish();
-		return false;
-	}
-
-	const bool kept_all = tx_queue_.push(frame);
-	if (stats_.state != CanState::Down)
-		flush();
-	publish();
-	return kept_all;
+	closeQueues();
 }
 
 void SocketCanBus::poll()
 {
-	if (!opened_)
+	if (!isOpen())
 		return;
 	if (stats_.state == CanState::Down) {
 		const std::int64_t now_ns = io_->nowNs();
@@ -367,50 +328,22 @@ void SocketCanBus::poll()
 			return;
 		}
 	}
-	flush();
+	transmit();
 	drain();
 	publish();
 }
 
-bool SocketCanBus::receive(CanFrame *frame)
-{
-	if (!opened_)
-		return false;
-	if (rx_ring_.empty())
-		poll();
-	if (rx_ring_.empty())
-		return false;
-	*frame = rx_ring_.front();
-	rx_ring_.pop();
-	return true;
-}
-
-CanStats SocketCanBus::stats() const
-{
-	std::lock_guard<std::mutex> lock(shared_mutex_);
-	return shared_stats_;
-}
-
-std::uint64_t SocketCanBus::rxDropped() const
-{
-	std::lock_guard<std::mutex> lock(shared_mutex_);
-	return shared_rx_dropped_;
-}
-
-std::string SocketCanBus::lastError() const
-{
-	return std::string(error_.data());
-}
-
 int SocketCanBus::fd() const
 {
-	return opened_ ? io_->fd() : -1;
+	return isOpen() ? io_->fd() : -1;
 }
 
-void SocketCanBus::flush()
+void SocketCanBus::transmit()
 {
-	while (!tx_queue_.empty()) {
-		const CanFrame &frame = tx_queue_.front();
+	if (stats_.state == CanState::Down)
+		return;
+	while (!tx_.empty()) {
+		const CanFrame &frame = tx_.front();
 		int err;
 		if (frame.fd) {
 			canfd_frame k;
@@ -422,7 +355,7 @@ void SocketCanBus::flush()
 			err = io_->write(&k, CAN_MTU);
 		}
 		if (err == 0) {
-			tx_queue_.pop();
+			tx_.pop();
 			++stats_.tx_frames;
 			continue;
 		}
@@ -438,7 +371,7 @@ void SocketCanBus::flush()
 			++stats_.tx_errors;
 			setError("can: %s refused frame 0x%x (%s); dropped", interface_.c_str(),
 				 frame.id, errorText(err, buf, sizeof(buf)));
-			tx_queue_.pop();
+			tx_.pop();
 			continue;
 		case socketcan::WriteErrorKind::LinkLost:
 			++stats_.tx_errors;
@@ -464,7 +397,7 @@ void SocketCanBus::drain()
 
 		if (r.has_drop_count) {
 			/* A running count; unsigned arithmetic survives its wrap. */
-			rx_dropped_ += static_cast<std::uint32_t>(r.drop_count - kernel_drops_);
+			countRxLost(static_cast<std::uint32_t>(r.drop_count - kernel_drops_));
 			kernel_drops_ = r.drop_count;
 		}
 
@@ -477,22 +410,15 @@ void SocketCanBus::drain()
 				continue;
 			}
 			if (socketcan::fromCanFrame(k, r.timestamp_ns, &frame))
-				accept(frame);
+				received(frame);
 		} else if (r.size == CANFD_MTU) {
 			if (socketcan::fromCanFdFrame(r.frame, r.timestamp_ns, &frame))
-				accept(frame);
+				received(frame);
 		} else {
 			setError("can: %s gave a frame of %zu bytes (neither %zu nor %zu); ignored",
 				 interface_.c_str(), r.size, CAN_MTU, CANFD_MTU);
 		}
 	}
-}
-
-void SocketCanBus::accept(const CanFrame &frame)
-{
-	++stats_.rx_frames;
-	if (!rx_ring_.push(frame))
-		++rx_dropped_;
 }
 
 void SocketCanBus::linkLost(int err, const char *operation)
@@ -508,7 +434,7 @@ void SocketCanBus::linkLost(int err, const char *operation)
 
 bool SocketCanBus::reopen(std::int64_t now_ns)
 {
-	if (!io_->open(request(), false, error_)) {
+	if (!io_->open(request(), false, errorBuffer())) {
 		next_reopen_ns_ = now_ns + static_cast<std::int64_t>(kReopenInterval_ms) * 1000000;
 		return false;
 	}
@@ -516,23 +442,6 @@ bool SocketCanBus::reopen(std::int64_t now_ns)
 	++stats_.restarts;
 	stats_.state = CanState::ErrorActive;
 	return true;
-}
-
-void SocketCanBus::setError(const char *format, ...)
-{
-	va_list args;
-	va_start(args, format);
-	std::vsnprintf(error_.data(), error_.size(), format, args);
-	va_end(args);
-}
-
-void SocketCanBus::publish()
-{
-	stats_.tx_queued = static_cast<std::uint32_t>(tx_queue_.size());
-	stats_.tx_dropped = tx_queue_.dropped() + closed_dropped_;
-	std::lock_guard<std::mutex> lock(shared_mutex_);
-	shared_stats_ = stats_;
-	shared_rx_dropped_ = rx_dropped_;
 }
 
 /* ------------------------------------------------------------------------- */

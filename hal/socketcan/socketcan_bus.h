@@ -25,11 +25,11 @@
  *    can: interface "can0" is down (ip link set can0 up type can bitrate 500000)
  *    can: interface "eth0" is not a CAN interface
  *    can: interface "can0" does not support CAN FD (MTU 16, not 72: ip link set can0 type can ... fd on)
- * After a failed open() the bus is Closed: send() drops (tx_dropped, false),
+ * After a failed open() the bus is Closed: send() refuses (tx_errors, false),
  * poll() and receive() do nothing; nothing is retried until open() is called again.
  *
  * What each situation does (the vcan tests in the VM rely on this):
- *  - send(): the frame joins the transmit queue (CanTxQueue, tx_queue_depth
+ *  - send() (CanBusBase's): the frame joins the transmit queue (tx_queue_depth
  *    frames, oldest dropped and counted in tx_dropped when full, send() then
  *    returns false), then as many queued frames as the kernel takes are
  *    written, oldest first (tx_frames). Refused without queueing (tx_errors,
@@ -69,9 +69,10 @@
  *  - receive(): the oldest frame of the ring (poll() first when it is empty).
  *
  * Threads: the frame thread owns the bus; stats() and rxDropped() are safe
- * from any thread (a copy under a mutex, refreshed at the end of every call).
+ * from any thread (CanBusBase: a copy under a mutex, refreshed at the end of
+ * every call).
  *
- * Allocates: the constructor and open() (queue, ring, filters, error text);
+ * Allocates: the constructor and open() (the kernel filters, error text);
  * send(), poll() (reopening included), receive(), stats() and rxDropped()
  * never. name() and lastError() return a new string.
  */
@@ -88,8 +89,7 @@
 #include <string>
 #include <vector>
 
-#include "hal/can_bus.h"
-#include "hal/can_tx_queue.h"
+#include "hal/can_bus_base.h"
 #include "hal/status.h"
 
 namespace dockpose::hal {
@@ -146,7 +146,7 @@ public:
 
 std::unique_ptr<SocketCanIo> makeKernelSocketCanIo();
 
-class SocketCanBus : public CanBus
+class SocketCanBus : public CanBusBase
 {
 public:
 	static constexpr int kReopenInterval_ms = 500;
@@ -159,54 +159,30 @@ public:
 	SocketCanBus(std::string interface, std::unique_ptr<SocketCanIo> io, int bitrate = 500000);
 	~SocketCanBus() override;
 
-	/* "socketcan:can0" */
-	std::string name() const override;
+	/* name(): "socketcan:can0" */
 	Status open(std::span<const CanFilter> filters, const CanOptions &options) override;
 	void close() override;
-
-	bool send(const CanFrame &frame) override;
 	void poll() override;
-	bool receive(CanFrame *frame) override;
 
-	CanStats stats() const override;
-	std::string lastError() const override;
-
-	/* Received frames lost: ring overflow plus the kernel's socket drops. Any thread. */
-	std::uint64_t rxDropped() const;
 	/* The socket (for poll(2) on readability); -1 when closed or Down. Frame thread. */
 	int fd() const;
 
 private:
-	void flush();
+	void transmit() override;
+	void fetch() override { poll(); }
 	void drain();
-	void accept(const CanFrame &frame);
 	void linkLost(int err, const char *operation);
 	bool reopen(std::int64_t now_ns);
 	SocketCanOpenRequest request() const;
-	void setError(const char *format, ...) __attribute__((format(printf, 2, 3)));
-	void publish();
 
 	std::string interface_;
 	int bitrate_;
 	std::unique_ptr<SocketCanIo> io_;
 
 	/* Frame thread only. */
-	bool opened_ = false;
-	bool fd_ = false;
 	std::vector<can_filter> kernel_filters_;
-	CanTxQueue tx_queue_;
-	CanTxQueue rx_ring_; /* the same drop-oldest ring, for received frames */
-	CanStats stats_;
-	std::uint64_t rx_dropped_ = 0;
-	std::uint64_t closed_dropped_ = 0; /* sends while closed */
 	std::uint32_t kernel_drops_ = 0; /* the socket's drop count last seen */
 	std::int64_t next_reopen_ns_ = 0;
-	std::array<char, 256> error_{};
-
-	/* What stats() and rxDropped() return. */
-	mutable std::mutex shared_mutex_;
-	CanStats shared_stats_;
-	std::uint64_t shared_rx_dropped_ = 0;
 };
 
 /* The pure parts, exposed for tests. None allocates unless it returns a std::string. */

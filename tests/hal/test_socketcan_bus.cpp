@@ -221,7 +221,9 @@ TEST(SocketCanBus, OpenFailureLeavesItClosedAndSendsDrop)
 	EXPECT_EQ(bus.lastError(), st.message());
 	EXPECT_EQ(bus.stats().state, CanState::Closed);
 	EXPECT_FALSE(bus.send(frame(0x300)));
-	EXPECT_EQ(bus.stats().tx_dropped, 1u);
+	EXPECT_EQ(bus.stats().tx_errors, 1u)
+		<< "a send on a closed bus is refused, as on every backend";
+	EXPECT_EQ(bus.stats().tx_dropped, 0u);
 	bus.poll();
 	CanFrame f;
 	EXPECT_FALSE(bus.receive(&f));
@@ -237,7 +239,12 @@ TEST(SocketCanBus, OpenRejectsBadArguments)
 	options.tx_queue_depth = 0;
 	Status st = bus.open({}, options);
 	ASSERT_FALSE(st.isOk());
-	EXPECT_EQ(st.message(), "can: tx_queue_depth 0 must be at least 1");
+	EXPECT_EQ(st.message(), "socketcan:can0: tx_queue_depth 0 must be in [1, 4096]");
+	options.tx_queue_depth = static_cast<int>(hal::kMaxCanTxQueueDepth) + 1;
+	st = bus.open({}, options);
+	ASSERT_FALSE(st.isOk());
+	EXPECT_EQ(st.message(), "socketcan:can0: tx_queue_depth 4097 must be in [1, 4096]");
+	options.tx_queue_depth = 1;
 
 	std::vector<CanFilter> many(CAN_RAW_FILTER_MAX + 1);
 	st = bus.open(many, CanOptions{});
@@ -548,11 +555,11 @@ TEST(SocketCanBus, CloseStopsEverything)
 	EXPECT_EQ(s.state, CanState::Closed);
 	EXPECT_EQ(s.tx_queued, 0u);
 	EXPECT_FALSE(h.bus->send(frame(0x301)));
-	EXPECT_EQ(h.bus->stats().tx_dropped, 1u);
+	EXPECT_EQ(h.bus->stats().tx_errors, 1u);
 
 	/* Opening again starts afresh. */
 	ASSERT_TRUE(h.bus->open({}, CanOptions{}).isOk());
-	EXPECT_EQ(h.bus->stats().tx_dropped, 0u);
+	EXPECT_EQ(h.bus->stats().tx_errors, 0u);
 	EXPECT_EQ(h.bus->stats().state, CanState::ErrorActive);
 }
 
