@@ -17,7 +17,10 @@
 
 #include "algo/camera_model.h"
 #include "algo/target_model.h"
+#include "hal/camera.h"
+#include "hal/can_bus.h"
 #include "hal/sim/synthetic_scene.h"
+#include "hal/strobe.h"
 
 namespace dockpose::board {
 
@@ -51,39 +54,38 @@ struct ReplayCameraConfig {
 	bool loop = false;
 };
 
-struct CameraSection {
+/*
+ * The camera section is the hal's camera configuration itself (id, index,
+ * width, height, exposure_us, analogue_gain, frame_rate_hz, buffer_count:
+ * hal/camera.h, handed to Camera::configure() as it is) plus what the board
+ * adds. width/height 0: the sensor's default (libcamera); they must match the
+ * intrinsics.
+ */
+struct CameraSection : hal::CameraConfig {
 	std::string backend; /* "libcamera", "synthetic", "replay": must be one the board wires */
-	std::string id; /* libcamera camera id; empty: by index */
-	int index = 0;
-	int width = 0; /* 0: the sensor's default (libcamera); must match intrinsics */
-	int height = 0;
-	double frame_rate_hz = 60.0;
-	int exposure_us = 2000;
-	double analogue_gain = 1.0;
-	int buffer_count = 4;
 	int stall_timeout_ms = 500; /* no frame for this long: fault, LED off */
 	std::string intrinsics; /* camera JSON (method.md section 3) */
 	hal::SyntheticScene synthetic; /* the synthetic camera's scene, read as it is */
 	ReplayCameraConfig replay;
 };
 
-struct StrobeSection {
+/* The strobe section is the hal's strobe line (chip, line, active_low: hal/strobe.h, the
+ * gpiod backend's) plus what the board adds. */
+struct StrobeSection : hal::StrobeLine {
 	std::string backend; /* "gpiod", "recording" */
-	std::string chip; /* gpiod: chip name ("gpiochip0"), path, or label ("pinctrl-rp1") */
-	int line = -1; /* gpiod: line offset on the chip */
-	bool active_low = false;
 	StrobeMode mode = StrobeMode::Constant;
 	/* Alternate mode: light this long around each lit exposure. */
 	int pulse_margin_us = 500;
 };
 
-struct CanSection {
-	std::string backend; /* "socketcan", "file", "loopback" */
+/* The CAN section is the hal's bus options (tx_queue_depth; fd stays off: the
+ * protocol's frames are classic) plus what the board adds. */
+struct CanSection : hal::CanOptions {
+	std::string backend; /* one the board wires (board::backendNames): "socketcan", "file" */
 	std::string interface; /* socketcan: "can0" */
 	std::string log_file; /* file: candump -l log written here (--can-log overrides) */
 	std::uint32_t base_id = 0x300; /* 11-bit; base_id .. base_id + 0x10 are used */
 	int bitrate = 500000; /* the bus's bit rate, for the bus-load check and docs */
-	int tx_queue_depth = 32;
 	int heartbeat_hz = 10;
 };
 

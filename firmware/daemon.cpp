@@ -117,24 +117,12 @@ hal::Status Daemon::start()
 		return hal::Status::error("strobe: " + s.message());
 
 	const hal::CanFilter commands{ config_.can.base_id + can::kCommand, 0x7ff, false };
-	hal::CanOptions can_options;
-	can_options.tx_queue_depth = config_.can.tx_queue_depth;
 	if (auto s =
-		    backends_.can->open(std::span<const hal::CanFilter>(&commands, 1), can_options);
+		    backends_.can->open(std::span<const hal::CanFilter>(&commands, 1), config_.can);
 	    !s)
 		return hal::Status::error("can: " + s.message());
 
-	hal::CameraConfig camera;
-	camera.id = config_.camera.id;
-	camera.index = config_.camera.index;
-	camera.width = config_.camera.width;
-	camera.height = config_.camera.height;
-	camera.exposure_us = config_.camera.exposure_us;
-	camera.analogue_gain = config_.camera.analogue_gain;
-	camera.frame_duration_us =
-		static_cast<int>(std::lround(1e6 / config_.camera.frame_rate_hz));
-	camera.buffer_count = config_.camera.buffer_count;
-	if (auto s = backends_.camera->configure(camera); !s)
+	if (auto s = backends_.camera->configure(config_.camera); !s)
 		return hal::Status::error("camera: " + s.message());
 	const auto &k = pipeline_->camera().intrinsics();
 	if (backends_.camera->width() != k.width || backends_.camera->height() != k.height)

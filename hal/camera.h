@@ -19,6 +19,7 @@
  */
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 
@@ -36,13 +37,26 @@ struct CameraConfig {
 	 * in Camera::width()/height(). */
 	int width = 0;
 	int height = 0;
-	/* Manual exposure (auto-exposure off), analogue gain, and a fixed frame duration
-	 * (frame-duration limits min = max); frame_duration_us 0 leaves the rate free. */
+	/* Manual exposure (auto-exposure off), analogue gain, and a fixed frame rate
+	 * (frame-duration limits min = max = frameDurationUs()); frame_rate_hz 0 leaves the
+	 * rate free. */
 	int exposure_us = 2000;
 	double analogue_gain = 1.0;
-	int frame_duration_us = 16667;
+	double frame_rate_hz = 60.0;
 	/* Buffers (and requests) allocated once. */
 	int buffer_count = 4;
+
+	/* The frame duration of frame_rate_hz, rounded to the microsecond; 0 when the rate is
+	 * free (0), and -1 when frame_rate_hz is negative or not a number (an error to report). */
+	int frameDurationUs() const
+	{
+		if (frame_rate_hz == 0.0)
+			return 0;
+		if (!(frame_rate_hz >= 1e-3))
+			return -1;
+		const long duration_us = std::lround(1e6 / frame_rate_hz);
+		return duration_us < 1 ? 1 : static_cast<int>(duration_us);
+	}
 };
 
 struct Frame {

@@ -26,6 +26,13 @@
 
 namespace dockpose::hal {
 
+/* The GPIO line a strobe drives (the gpiod backend; a board's strobe section holds it). */
+struct StrobeLine {
+	std::string chip; /* chip name ("gpiochip0"), path, or label ("pinctrl-rp1") */
+	int line = -1; /* line offset on the chip */
+	bool active_low = false; /* the LED is on when the line is low */
+};
+
 class Strobe
 {
 public:

@@ -24,8 +24,7 @@ constexpr const char *kCans[] = { "socketcan" };
 
 hal::Status wire(const BoardConfig &config, Backends *out)
 {
-	auto strobe = std::make_unique<hal::GpiodStrobe>(config.strobe.chip, config.strobe.line,
-							 config.strobe.active_low);
+	auto strobe = std::make_unique<hal::GpiodStrobe>(config.strobe);
 	out->strobe_control = std::make_unique<hal::StrobeController>(
 		strobe.get(), config.camera.stall_timeout_ms);
 	out->strobe = std::move(strobe);

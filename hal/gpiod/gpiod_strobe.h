@@ -40,6 +40,7 @@
 
 #include <atomic>
 #include <string>
+#include <utility>
 
 #include "hal/status.h"
 #include "hal/strobe.h"
@@ -51,6 +52,10 @@ class GpiodStrobe : public Strobe
 public:
 	/* chip: name, number, path or label; line: offset on the chip (>= 0). */
 	GpiodStrobe(std::string chip, int line, bool active_low, std::string consumer = "dockpose");
+	explicit GpiodStrobe(const StrobeLine &line, std::string consumer = "dockpose")
+		: GpiodStrobe(line.chip, line.line, line.active_low, std::move(consumer))
+	{
+	}
 	~GpiodStrobe() override;
 
 	/* "gpiochip0 [pinctrl-rp1] line 17 (active-low)" once open, else the chip as given. */

@@ -289,13 +289,15 @@ Status checkCameraConfig(const CameraConfig &config)
 	if (!std::isfinite(config.analogue_gain) || config.analogue_gain < 1.0)
 		return Status::error("libcamera: analogue_gain " +
 				     std::to_string(config.analogue_gain) + " must be >= 1.0");
-	if (config.frame_duration_us < 0)
-		return Status::error("libcamera: frame_duration_us " +
-				     std::to_string(config.frame_duration_us) + " must be >= 0");
-	if (config.frame_duration_us > 0 && config.exposure_us > config.frame_duration_us)
+	const int duration_us = config.frameDurationUs();
+	if (duration_us < 0)
+		return Status::error("libcamera: frame_rate_hz " +
+				     std::to_string(config.frame_rate_hz) + " must be >= 0");
+	if (duration_us > 0 && config.exposure_us > duration_us)
 		return Status::error(
 			"libcamera: exposure_us " + std::to_string(config.exposure_us) +
-			" exceeds frame_duration_us " + std::to_string(config.frame_duration_us));
+			" exceeds the frame duration " + std::to_string(duration_us) +
+			" us (frame_rate_hz " + std::to_string(config.frame_rate_hz) + ")");
 	return Status::ok();
 }
 
@@ -772,9 +774,9 @@ Status LibcameraCamera::Impl::start()
 		controls.set(lc::controls::ExposureTime, exposure_us);
 	if (has_gain_)
 		controls.set(lc::controls::AnalogueGain, gain);
-	if (has_frame_duration_ && camera_config_.frame_duration_us > 0) {
-		const std::int64_t limits[2] = { camera_config_.frame_duration_us,
-						 camera_config_.frame_duration_us };
+	if (const std::int64_t duration_us = camera_config_.frameDurationUs();
+	    has_frame_duration_ && duration_us > 0) {
+		const std::int64_t limits[2] = { duration_us, duration_us };
 		controls.set(lc::controls::FrameDurationLimits,
 			     lc::Span<const std::int64_t, 2>(limits));
 	}

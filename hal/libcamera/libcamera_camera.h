@@ -162,7 +162,8 @@ Status selectCamera(const std::vector<std::string> &ids, const std::string &id, 
 		    std::size_t *chosen);
 
 /* Checks a CameraConfig before libcamera is touched (buffer_count 2..16,
- * exposure_us > 0 and <= frame_duration_us when that is > 0, gain >= 1, sizes >= 0). */
+ * exposure_us > 0 and <= the frame duration when the rate is fixed, frame_rate_hz >= 0,
+ * gain >= 1, sizes >= 0). */
 Status checkCameraConfig(const CameraConfig &config);
 
 /* Exposure start of the first row from a frame-start (readout) timestamp. */

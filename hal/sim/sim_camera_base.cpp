@@ -66,11 +66,11 @@ Status SimCameraBase::setup(const CameraConfig &config, int width, int height)
 	if (config.buffer_count < 1 || config.buffer_count > kMaxBuffers)
 		return fail(name() + ": buffer_count " + std::to_string(config.buffer_count) +
 			    " is out of range [1, " + std::to_string(kMaxBuffers) + "]");
-	if (config.frame_duration_us < 0)
-		return fail(name() + ": frame_duration_us " +
-			    std::to_string(config.frame_duration_us) + " is negative");
-	const int duration_us = config.frame_duration_us > 0 ? config.frame_duration_us
-							     : kDefaultFrameDurationUs;
+	const int fixed_us = config.frameDurationUs();
+	if (fixed_us < 0)
+		return fail(name() + ": frame_rate_hz " + std::to_string(config.frame_rate_hz) +
+			    " is negative or not a number");
+	const int duration_us = fixed_us > 0 ? fixed_us : kDefaultFrameDurationUs;
 	if (config.exposure_us <= 0 || config.exposure_us > duration_us)
 		return fail(name() + ": exposure_us " + std::to_string(config.exposure_us) +
 			    " is out of range [1, " + std::to_string(duration_us) +

@@ -55,7 +55,7 @@ class SimCameraBase : public Camera
 public:
 	/* Buffers per camera: 1 .. kMaxBuffers (the FrameQueue's capacity). */
 	static constexpr int kMaxBuffers = 16;
-	/* frame_duration_us 0 ("rate free") runs at this period. */
+	/* frame_rate_hz 0 ("rate free") runs at this period. */
 	static constexpr int kDefaultFrameDurationUs = 16667;
 
 	enum class LatePolicy : std::uint8_t {

@@ -159,14 +159,16 @@ TEST(LibcameraConfig, ChecksBeforeTouchingTheCamera)
 	c.analogue_gain = std::nan("");
 	EXPECT_FALSE(checkCameraConfig(c));
 	c = CameraConfig{};
-	c.frame_duration_us = -1;
-	EXPECT_THAT(checkCameraConfig(c).message(), HasSubstr("frame_duration_us -1"));
+	c.frame_rate_hz = -1;
+	EXPECT_THAT(checkCameraConfig(c).message(), HasSubstr("frame_rate_hz -1"));
+	c.frame_rate_hz = std::nan("");
+	EXPECT_THAT(checkCameraConfig(c).message(), HasSubstr("frame_rate_hz nan"));
 	c = CameraConfig{};
 	c.exposure_us = 20000;
-	c.frame_duration_us = 16667;
+	c.frame_rate_hz = 60;
 	EXPECT_THAT(checkCameraConfig(c).message(),
-		    HasSubstr("exposure_us 20000 exceeds frame_duration_us 16667"));
-	c.frame_duration_us = 0; /* free-running: any exposure */
+		    HasSubstr("exposure_us 20000 exceeds the frame duration 16667 us"));
+	c.frame_rate_hz = 0; /* free-running: any exposure */
 	EXPECT_TRUE(checkCameraConfig(c));
 }
 

@@ -91,7 +91,7 @@ SyntheticScene movingScene()
 CameraConfig config(int frame_duration_us, int buffers = 4)
 {
 	CameraConfig c;
-	c.frame_duration_us = frame_duration_us;
+	c.frame_rate_hz = frame_duration_us > 0 ? 1e6 / frame_duration_us : 0.0;
 	c.exposure_us = 2000;
 	c.analogue_gain = 1.0;
 	c.buffer_count = buffers;
