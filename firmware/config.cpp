@@ -317,6 +317,23 @@ bool asInt64(const json &j, std::int64_t *out)
 	return false;
 }
 
+/*
+ * The key's value as an integer (asInt64): Absent when the key is missing,
+ * Bad (with "expected an integer" reported) when it is not an integral
+ * number; *j is the key's JSON value when not Absent.
+ */
+Got readInteger(Section &s, const char *key, const json **j, std::int64_t *out)
+{
+	*j = s.get(key);
+	if (!*j)
+		return Got::Absent;
+	if (!asInt64(**j, out)) {
+		s.checker().fail(s.at(key), "expected an integer, got " + describe(**j));
+		return Got::Bad;
+	}
+	return Got::Ok;
+}
+
 /* An upper bound for getInt() that is only the int's own limit (not shown in messages). */
 constexpr std::int64_t kNoLimit = std::numeric_limits<int>::max();
 
@@ -326,14 +343,10 @@ Got getInt(Section &s, const char *key, const Range &range, int *out)
 						     : static_cast<std::int64_t>(range.lo);
 	const std::int64_t hi = std::isinf(range.hi) ? kNoLimit
 						     : static_cast<std::int64_t>(range.hi);
-	const json *j = s.get(key);
-	if (!j)
-		return Got::Absent;
+	const json *j = nullptr;
 	std::int64_t v = 0;
-	if (!asInt64(*j, &v)) {
-		s.checker().fail(s.at(key), "expected an integer, got " + describe(*j));
-		return Got::Bad;
-	}
+	if (const Got got = readInteger(s, key, &j, &v); got != Got::Ok)
+		return got;
 	if (v < lo || v > hi) {
 		s.checker().fail(s.at(key),
 				 j->dump() + " is out of range " +
@@ -348,17 +361,13 @@ Got getInt(Section &s, const char *key, const Range &range, int *out)
 
 Got getUint64(Section &s, const char *key, std::uint64_t *out)
 {
-	const json *j = s.get(key);
-	if (!j)
-		return Got::Absent;
-	if (j->is_number_unsigned()) {
-		*out = j->get<std::uint64_t>();
-		return Got::Ok;
-	}
+	const json *j = nullptr;
 	std::int64_t v = 0;
-	if (!asInt64(*j, &v)) {
-		s.checker().fail(s.at(key), "expected an integer, got " + describe(*j));
-		return Got::Bad;
+	if (const Got got = readInteger(s, key, &j, &v); got != Got::Ok)
+		return got;
+	if (j->is_number_unsigned()) {
+		*out = j->get<std::uint64_t>(); /* all of uint64, beyond int64's saturation */
+		return Got::Ok;
 	}
 	if (v < 0) {
 		s.checker().fail(s.at(key), j->dump() + " is out of range (must be >= 0)");
@@ -494,18 +503,14 @@ void checkReplayFolder(Checker &c, const std::string &path, const std::string &w
 	c.fail(path, shown + " holds no frame_*.pgm files");
 }
 
-/* A string that must be one of `values`; the message names them with `what`. */
+/* An integer that must be one of `values`; the message names them with `what`. */
 Got getOneOf(Section &s, const char *key, std::span<const std::int64_t> values, const char *what,
 	     int *out)
 {
-	const json *j = s.get(key);
-	if (!j)
-		return Got::Absent;
+	const json *j = nullptr;
 	std::int64_t v = 0;
-	if (!asInt64(*j, &v)) {
-		s.checker().fail(s.at(key), "expected an integer, got " + describe(*j));
-		return Got::Bad;
-	}
+	if (const Got got = readInteger(s, key, &j, &v); got != Got::Ok)
+		return got;
 	if (std::find(values.begin(), values.end(), v) == values.end()) {
 		std::string list;
 		for (std::int64_t r : values)
