@@ -23,6 +23,7 @@
 
 #include <gtest/gtest.h>
 
+#include "alternate_strobe_fixtures.h"
 #include "firmware/alternate_strobe.h"
 #include "hal/camera.h"
 #include "hal/clock.h"
@@ -50,13 +51,7 @@ constexpr int kStride = 11;
 
 AlternateStrobeConfig periodConfig()
 {
-	AlternateStrobeConfig config;
-	config.width = kWidth;
-	config.height = kHeight;
-	config.period_ns = kPeriod60HzNs;
-	config.max_interval_ns = kMaxIntervalNs;
-	config.pulse_margin_ns = kMs / 2;
-	return config;
+	return test::alternateStrobeConfig(kWidth, kHeight, kPeriod60HzNs, kMaxIntervalNs, kMs / 2);
 }
 
 hal::Frame timedFrame(std::uint64_t sequence, std::int64_t timestamp_ns,

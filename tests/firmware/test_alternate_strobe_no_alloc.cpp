@@ -14,6 +14,7 @@
 
 #include "../common/counting_allocator.h"
 #include "algo/image.h"
+#include "alternate_strobe_fixtures.h"
 #include "firmware/alternate_strobe.h"
 #include "hal/camera.h"
 #include "hal/clock.h"
@@ -32,13 +33,7 @@ constexpr int kFrames = 60;
 
 AlternateStrobeConfig config()
 {
-	AlternateStrobeConfig c;
-	c.width = kWidth;
-	c.height = kHeight;
-	c.period_ns = kPeriodNs;
-	c.max_interval_ns = 20 * kPeriodNs;
-	c.pulse_margin_ns = kMs / 5;
-	return c;
+	return test::alternateStrobeConfig(kWidth, kHeight, kPeriodNs, 20 * kPeriodNs, kMs / 5);
 }
 
 TEST(AlternateStrobeNoAlloc, TheConstructorAllocatesAndTheHooksSeeIt)
