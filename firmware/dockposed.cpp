@@ -21,6 +21,7 @@
 #include <cstring>
 #include <exception>
 #include <string>
+#include <utility>
 
 #include <CLI/CLI.hpp>
 
@@ -135,30 +136,34 @@ std::string join(std::span<const char *const> names)
 }
 
 /* The daemon itself; main() turns an exception that escapes it into exit 70. */
-int run(int argc, char **argv)
+/* The command line. */
+struct Options {
+	std::string board_path;
+	double run_for_s = 0.0;
+	std::string can_log;
+	int startup_timeout_s = kDefaultStartupTimeoutS;
+};
+
+/* Parse the command line into *options: -1 to go on, else the exit status (--help: 0, bad: 2). */
+int parseOptions(int argc, char **argv, Options *options)
 {
 	using namespace dockpose;
 
 	CLI::App app{ "dockposed: LED-target docking sensor (pose on CAN)" };
-	std::string board_path;
-	double run_for_s = 0.0;
-	std::string can_log;
-	app.add_option("--board", board_path,
+	app.add_option("--board", options->board_path,
 		       "the board's configuration file (board/<name>/board.json)")
 		->required();
-	app.add_option("--for", run_for_s,
+	app.add_option("--for", options->run_for_s,
 		       "run this many seconds, then shut down cleanly (0: until SIGTERM)")
 		->check(CLI::NonNegativeNumber);
-	app.add_option("--can-log", can_log,
+	app.add_option("--can-log", options->can_log,
 		       "write CAN frames to this candump log (boards whose CAN backend is 'file')");
-	int startup_timeout_s = kDefaultStartupTimeoutS;
 	app.add_option(
-		   "--startup-timeout", startup_timeout_s,
+		   "--startup-timeout", options->startup_timeout_s,
 		   "seconds the backends may take to open and start before dockposed gives up (exit 75)")
 		->check(CLI::Range(1, 600))
 		->capture_default_str();
 	/* Prints a key table of docs/configuration.md (scripts/update-config-doc), then exits. */
-	std::string doc_section;
 	std::string doc_sections;
 	for (const std::string &name : firmware::config_table::docSections())
 		doc_sections += (doc_sections.empty() ? "" : ", ") + name;
@@ -180,18 +185,30 @@ int run(int argc, char **argv)
 	} catch (const CLI::ParseError &e) {
 		return app.exit(e) == 0 ? 0 : 2;
 	}
+	return -1;
+}
 
-	firmware::ConfigResult loaded = firmware::loadBoardConfig(board_path);
+/*
+ * Read and validate the board file, find its board among those built in and
+ * check the backends it names are ones that board wires; --can-log goes into
+ * the configuration. Null (the problems on stderr) when any of it fails.
+ */
+const dockpose::board::BoardInfo *loadBoard(const Options &options,
+					    dockpose::firmware::BoardConfig *config)
+{
+	using namespace dockpose;
+
+	firmware::ConfigResult loaded = firmware::loadBoardConfig(options.board_path);
 	if (!loaded.ok()) {
 		std::fprintf(stderr, "dockposed: %s: %zu error(s) in the board file:\n",
-			     board_path.c_str(), loaded.errors.size());
+			     options.board_path.c_str(), loaded.errors.size());
 		for (const std::string &e : loaded.errors)
 			std::fprintf(stderr, "  %s\n", e.c_str());
-		return 2;
+		return nullptr;
 	}
-	firmware::BoardConfig &config = loaded.config;
+	*config = std::move(loaded.config);
 
-	const board::BoardInfo *info = board::findBoard(config.board);
+	const board::BoardInfo *info = board::findBoard(config->board);
 	if (!info) {
 		std::string built;
 		for (const board::BoardInfo &b : board::boards())
@@ -199,17 +216,17 @@ int run(int argc, char **argv)
 		std::fprintf(
 			stderr,
 			"dockposed: %s: board \"%s\" is not built into this dockposed (built: %s)\n",
-			board_path.c_str(), config.board.c_str(), built.c_str());
-		return 2;
+			options.board_path.c_str(), config->board.c_str(), built.c_str());
+		return nullptr;
 	}
 	struct {
 		const char *section;
 		const std::string &value;
 		std::span<const char *const> allowed;
 	} const backends[] = {
-		{ "camera.backend", config.camera.backend, info->cameras },
-		{ "strobe.backend", config.strobe.backend, info->strobes },
-		{ "can.backend", config.can.backend, info->cans },
+		{ "camera.backend", config->camera.backend, info->cameras },
+		{ "strobe.backend", config->strobe.backend, info->strobes },
+		{ "can.backend", config->can.backend, info->cans },
 	};
 	bool wiring_ok = true;
 	for (const auto &b : backends) {
@@ -217,37 +234,45 @@ int run(int argc, char **argv)
 			std::fprintf(
 				stderr,
 				"dockposed: %s: %s: board %s has no \"%s\" backend (it has: %s)\n",
-				board_path.c_str(), b.section, info->name, b.value.c_str(),
+				options.board_path.c_str(), b.section, info->name, b.value.c_str(),
 				join(b.allowed).c_str());
 			wiring_ok = false;
 		}
 	}
 	if (!wiring_ok)
-		return 2;
-	if (!can_log.empty()) {
-		if (config.can.backend != "file") {
+		return nullptr;
+	if (!options.can_log.empty()) {
+		if (config->can.backend != "file") {
 			std::fprintf(
 				stderr,
 				"dockposed: --can-log only applies to boards whose CAN backend is \"file\" "
 				"(%s uses \"%s\")\n",
-				info->name, config.can.backend.c_str());
-			return 2;
+				info->name, config->can.backend.c_str());
+			return nullptr;
 		}
-		config.can.log_file = can_log;
+		config->can.log_file = options.can_log;
 	}
+	return info;
+}
 
-	armStartupWatchdog(startup_timeout_s);
+/* Wire the board, start the daemon under the start-up watchdog, run it: the exit status. */
+int runBoard(const Options &options, const dockpose::board::BoardInfo &info,
+	     const dockpose::firmware::BoardConfig &config)
+{
+	using namespace dockpose;
+
+	armStartupWatchdog(options.startup_timeout_s);
 	g_startup_step.store("opening the backends (camera, strobe, CAN)");
 	board::Backends wired;
-	if (auto s = info->wire(config, &wired); !s) {
-		std::fprintf(stderr, "dockposed: board %s: %s\n", info->name, s.message().c_str());
+	if (auto s = info.wire(config, &wired); !s) {
+		std::fprintf(stderr, "dockposed: board %s: %s\n", info.name, s.message().c_str());
 		return 1;
 	}
 
 	installSignalHandlers();
 	firmware::Daemon daemon(config, std::move(wired));
 	/* The signal handlers' strobe while the daemon lives; cleared before it is destroyed,
-	 * however run() is left. */
+	 * however this is left. */
 	const struct StrobeForSignals {
 		explicit StrobeForSignals(hal::Strobe *strobe) { g_strobe = strobe; }
 		~StrobeForSignals() { g_strobe = nullptr; }
@@ -262,9 +287,21 @@ int run(int argc, char **argv)
 		return 1;
 	}
 	::alarm(0);
-	const int status = daemon.run(g_stop, run_for_s);
+	const int status = daemon.run(g_stop, options.run_for_s);
 	daemon.printSummary(stderr);
 	return status;
+}
+
+int run(int argc, char **argv)
+{
+	Options options;
+	if (const int status = parseOptions(argc, argv, &options); status >= 0)
+		return status;
+	dockpose::firmware::BoardConfig config;
+	const dockpose::board::BoardInfo *info = loadBoard(options, &config);
+	if (!info)
+		return 2;
+	return runBoard(options, *info, config);
 }
 
 } /* namespace */

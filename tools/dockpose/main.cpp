@@ -344,72 +344,67 @@ int runRender(const RenderArgs &args)
 }
 
 /* The tool itself; main() turns an unexpected exception into a message and exit 3. */
-int run(int argc, char **argv)
+/* `dockpose solve`: its options into *solve. */
+CLI::App *addSolveCommand(CLI::App *app, SolveArgs *solve)
 {
-	CLI::App app{
-		"dockpose: 6-DoF pose of an infrared LED docking target from 8-bit frames.\n"
-		"Conventions: camera frame x right, y down, z forward, mm; pose X_c = R X_t + t;\n"
-		"quaternion (w, x, y, z) with w >= 0; R = Rx(roll) Ry(pan) Rz(tilt), degrees.\n"
-		"Exit codes: 0 success, 1 an image could not be read or written, 2 bad arguments\n"
-		"or a bad target/camera file, 3 an unexpected error (a bug; its message on stderr).",
-		"dockpose"
-	};
-	app.require_subcommand(1);
-
-	SolveArgs solve;
-	CLI::App *solve_cmd = app.add_subcommand(
+	CLI::App *solve_cmd = app->add_subcommand(
 		"solve", "Find the target's pose in PGM frames; one JSON line per image.");
 	solve_cmd
-		->add_option("--target,-t", solve.target,
+		->add_option("--target,-t", solve->target,
 			     "Target model JSON (LED points and faces, mm)")
 		->required();
-	solve_cmd->add_option("--camera,-c", solve.camera, "Camera intrinsics JSON")->required();
+	solve_cmd->add_option("--camera,-c", solve->camera, "Camera intrinsics JSON")->required();
 	solve_cmd
 		->add_option(
-			"--threshold", solve.threshold,
+			"--threshold", solve->threshold,
 			"Segmentation level: 'auto' (per tile from background and noise) or a fixed level 1..255")
 		->default_val("auto");
 	solve_cmd->add_flag(
-		"--track", solve.track,
+		"--track", solve->track,
 		"Treat the images as a sequence: predict from the last pose (default: solve each image on its own)");
 	solve_cmd->add_option(
-		"--annotate", solve.annotate_dir,
+		"--annotate", solve->annotate_dir,
 		"Also write DIR/<image stem>.ppm per image: the frame in grey, candidate blobs (yellow "
 		"crosses), matched LEDs (green circles), LEDs predicted but not matched (red circles), "
 		"the faces (green lines); a red border when no pose was found");
 	solve_cmd
-		->add_option("images", solve.images,
+		->add_option("images", solve->images,
 			     "Binary 8-bit PGM (P5) frames of the camera's size")
 		->required();
+	return solve_cmd;
+}
 
-	RenderArgs render;
-	CLI::App *render_cmd = app.add_subcommand(
+/* `dockpose render`: its options into *render; *range_opt is --range-mm (it or --pose is
+ * required). */
+CLI::App *addRenderCommand(CLI::App *app, RenderArgs *render, CLI::Option **range_opt)
+{
+	CLI::App *render_cmd = app->add_subcommand(
 		"render", "Render synthetic PGM frames with known truth (DIR/truth.jsonl).");
-	render_cmd->add_option("--target,-t", render.target, "Target model JSON")->required();
-	render_cmd->add_option("--camera,-c", render.camera, "Camera intrinsics JSON")->required();
+	render_cmd->add_option("--target,-t", render->target, "Target model JSON")->required();
+	render_cmd->add_option("--camera,-c", render->camera, "Camera intrinsics JSON")->required();
 	CLI::Option *pose_opt = render_cmd->add_option(
-		"--pose", render.poses,
+		"--pose", render->poses,
 		"Pose \"x,y,z,roll,pan,tilt\" (mm, degrees), X_c = R X_t + t; repeatable");
-	CLI::Option *range_opt = render_cmd->add_option(
-		"--range-mm", render.range_mm,
+	*range_opt = render_cmd->add_option(
+		"--range-mm", render->range_mm,
 		"Instead of --pose: target centre at this depth on the axis (mm)");
-	render_cmd->add_option("--rpy", render.rpy, "With --range-mm: roll,pan,tilt in degrees")
+	render_cmd->add_option("--rpy", render->rpy, "With --range-mm: roll,pan,tilt in degrees")
 		->default_val("0,0,0");
 	render_cmd
-		->add_option("--at", render.at,
+		->add_option("--at", render->at,
 			     "With --range-mm: target centre at this fraction u,v of the frame")
 		->default_val("0.5,0.5");
-	pose_opt->excludes(range_opt);
-	render_cmd->add_option("-o,--out", render.out_dir, "Output directory (created if needed)")
+	pose_opt->excludes(*range_opt);
+	render_cmd->add_option("-o,--out", render->out_dir, "Output directory (created if needed)")
 		->required();
-	render_cmd->add_option("--count", render.count, "Frames per pose (each with its own seed)")
+	render_cmd->add_option("--count", render->count, "Frames per pose (each with its own seed)")
 		->default_val(1)
 		->check(CLI::Range(1, 100000));
 	render_cmd
-		->add_option("--seed", render.seed,
+		->add_option("--seed", render->seed,
 			     "Seed of the first frame; frame i uses seed + i")
 		->default_val(1);
-	RenderOptions &o = render.options;
+	RenderOptions &o = render->options;
 	render_cmd->add_option("--noise", o.noise_sigma, "Gaussian read noise, levels (sigma)")
 		->default_val(o.noise_sigma)
 		->check(CLI::Range(0.0, 100.0));
@@ -453,6 +448,26 @@ int run(int argc, char **argv)
 		->add_option("--occlusion-mask", o.occlusion_mask,
 			     "Also hide these LEDs (bit i hides LED i)")
 		->default_val(0);
+	return render_cmd;
+}
+
+int run(int argc, char **argv)
+{
+	CLI::App app{
+		"dockpose: 6-DoF pose of an infrared LED docking target from 8-bit frames.\n"
+		"Conventions: camera frame x right, y down, z forward, mm; pose X_c = R X_t + t;\n"
+		"quaternion (w, x, y, z) with w >= 0; R = Rx(roll) Ry(pan) Rz(tilt), degrees.\n"
+		"Exit codes: 0 success, 1 an image could not be read or written, 2 bad arguments\n"
+		"or a bad target/camera file, 3 an unexpected error (a bug; its message on stderr).",
+		"dockpose"
+	};
+	app.require_subcommand(1);
+
+	SolveArgs solve;
+	CLI::App *solve_cmd = addSolveCommand(&app, &solve);
+	RenderArgs render;
+	CLI::Option *range_opt = nullptr;
+	CLI::App *render_cmd = addRenderCommand(&app, &render, &range_opt);
 
 	try {
 		app.parse(argc, argv);
