@@ -906,6 +906,22 @@ bool parseDocument(const std::string &text, const std::string &source, json *doc
 					  std::to_string(col) + ": " + what);
 		}
 		return false;
+	} catch (const json::exception &e) {
+		/* out_of_range.406, "number overflow parsing '1e400'": named by the key it was for. */
+		std::string path;
+		for (std::size_t i = 1; i < stack.size(); ++i)
+			path += (path.empty() || stack[i].name == "[]" ? "" : ".") + stack[i].name;
+		if (!stack.empty() && !stack.back().array && !stack.back().last_key.empty())
+			path += (path.empty() ? "" : ".") + stack.back().last_key;
+		const std::string what = e.what();
+		const std::size_t tag_end = what.find("] ");
+		errors->push_back(source + ": " + (path.empty() ? "" : path + ": ") +
+				  (dynamic_cast<const json::out_of_range *>(&e)
+					   ? "a number beyond the range of a double ("
+					   : "cannot be read as JSON (") +
+				  (tag_end == std::string::npos ? what : what.substr(tag_end + 2)) +
+				  ")");
+		return false;
 	}
 	if (!doc->is_object()) {
 		errors->push_back(source + ": the top level must be an object {...}, got " +

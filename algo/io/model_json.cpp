@@ -1,12 +1,14 @@
 /* SPDX-License-Identifier: MIT */
 #include "algo/io/model_json.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include <nlohmann/json.hpp>
 
@@ -42,6 +44,15 @@ Status parseDocument(const std::string &text, const std::string &source, json *d
 		*doc = json::parse(text, nullptr, true, /*ignore_comments=*/true);
 	} catch (const json::parse_error &e) {
 		return Status::error(source + ": not valid JSON (" + e.what() + ")");
+	} catch (const json::out_of_range &e) {
+		/* nlohmann's "[json.exception.out_of_range.406] number overflow parsing '1e400'" */
+		const std::string what = e.what();
+		const std::size_t tag_end = what.find("] ");
+		return Status::error(
+			source + ": a number beyond the range of a double (" +
+			(tag_end == std::string::npos ? what : what.substr(tag_end + 2)) + ")");
+	} catch (const json::exception &e) {
+		return Status::error(source + ": cannot be read as JSON (" + e.what() + ")");
 	}
 	if (!doc->is_object())
 		return Status::error(source + ": the top level must be a JSON object, not " +
@@ -291,20 +302,43 @@ Status readSigma(const json &doc, const std::string &source, CameraIntrinsics *k
 
 Result<std::string> readFileContents(const std::string &path)
 {
-	std::error_code ec;
-	if (std::filesystem::is_directory(path, ec))
-		return Status::error(path + ": is a directory, not a file");
-	std::ifstream in(path, std::ios::binary);
-	if (!in) {
+	/* O_NONBLOCK: opening a FIFO must not wait for a writer (it is refused below). */
+	const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+	if (fd < 0) {
 		const int err = errno;
 		return Status::error(path + ": cannot open (" +
 				     (err ? std::strerror(err) : "unknown error") + ")");
 	}
-	std::ostringstream ss;
-	ss << in.rdbuf();
-	if (in.bad())
-		return Status::error(path + ": read error");
-	return ss.str();
+	struct FdCloser {
+		int fd;
+		~FdCloser() { ::close(fd); }
+	} const closer{ fd };
+	struct stat st {
+	};
+	if (::fstat(fd, &st) != 0)
+		return Status::error(path + ": read error (" + std::strerror(errno) + ")");
+	if (S_ISDIR(st.st_mode))
+		return Status::error(path + ": is a directory, not a file");
+	if (!S_ISREG(st.st_mode))
+		return Status::error(path + ": is not a regular file (a device, FIFO or socket)");
+	if (st.st_size > static_cast<off_t>(kMaxTextFileBytes))
+		return Status::error(path + ": is " + std::to_string(st.st_size) +
+				     " bytes; a target, camera or board file has at most " +
+				     std::to_string(kMaxTextFileBytes));
+	std::string text(static_cast<std::size_t>(st.st_size), '\0');
+	std::size_t have = 0;
+	while (have < text.size()) {
+		const ssize_t n = ::read(fd, text.data() + have, text.size() - have);
+		if (n < 0 && errno == EINTR)
+			continue;
+		if (n < 0)
+			return Status::error(path + ": read error (" + std::strerror(errno) + ")");
+		if (n == 0)
+			break; /* shrank while read */
+		have += static_cast<std::size_t>(n);
+	}
+	text.resize(have);
+	return text;
 }
 
 Result<TargetModel> parseTargetModel(const std::string &json_text, const std::string &source)

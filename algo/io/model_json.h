@@ -29,6 +29,7 @@
  */
 #pragma once
 
+#include <cstddef>
 #include <string>
 
 #include "algo/camera_model.h"
@@ -54,9 +55,14 @@ Result<CameraIntrinsics> parseCameraIntrinsics(const std::string &json_text,
 /* Read and parse a camera file. */
 Result<CameraIntrinsics> loadCameraIntrinsics(const std::string &path);
 
+/* The largest target, camera or board file read (bytes); they are a few kB. */
+constexpr std::size_t kMaxTextFileBytes = std::size_t{ 1 } << 20;
+
 /*
- * Read a whole file. Errors say "<path>: <reason>". Used by the loaders above
- * and by the board file reader.
+ * Read a whole file. Errors say "<path>: <reason>": it cannot be opened, is a
+ * directory, is not a regular file (a device such as /dev/zero, a FIFO: never
+ * waited on), or is larger than kMaxTextFileBytes. Used by the loaders above
+ * and by the board file reader. Allocates: the text.
  */
 Result<std::string> readFileContents(const std::string &path);
 

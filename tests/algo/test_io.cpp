@@ -4,9 +4,12 @@
  * The good files of tests/data load with the exact values written in them;
  * each malformed input gives its own, specific error naming the source.
  */
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -174,6 +177,8 @@ TEST(ModelJson, BadTargetsGiveTheirOwnError)
 	nine_faces += "]";
 	const std::vector<BadCase> cases = {
 		{ "not JSON", "{\"points\": [", "not valid JSON" },
+		{ "overflowing number", R"({"points": [[0,0,1e400]], "faces": []})",
+		  "a number beyond the range of a double (number overflow parsing '1e400')" },
 		{ "top level array", "[1, 2]",
 		  "the top level must be a JSON object, not an array" },
 		{ "no points", R"({"faces": [[0,1,2,3]]})", "key 'points' is missing" },
@@ -238,6 +243,9 @@ TEST(ModelJson, BadCamerasGiveTheirOwnError)
 {
 	const std::vector<BadCase> cases = {
 		{ "not JSON", "{\"width\": 10,,}", "not valid JSON" },
+		{ "overflowing number",
+		  R"({"width": 640, "height": 480, "fx": 1e309, "fy": 500, "cx": 320, "cy": 240})",
+		  "a number beyond the range of a double (number overflow parsing '1e309')" },
 		{ "string top level", "\"camera\"",
 		  "the top level must be a JSON object, not a string" },
 		{ "no width", R"({"height": 480, "fx": 500, "fy": 500, "cx": 320, "cy": 240})",
@@ -290,6 +298,34 @@ TEST(ModelJson, MissingFileNamesThePath)
 	const auto c = loadCameraIntrinsics(kData);
 	EXPECT_FALSE(c.isOk());
 	EXPECT_NE(c.message().find("is a directory"), std::string::npos) << c.message();
+}
+
+TEST(ModelJson, OnlyRegularFilesOfBoundedSizeAreRead)
+{
+	/* /dev/zero was read until memory ran out; a FIFO without a writer blocked for ever. */
+	const auto zero = loadTargetModel("/dev/zero");
+	EXPECT_EQ(zero.message(), "/dev/zero: is not a regular file (a device, FIFO or socket)");
+
+	const std::string dir = ::testing::TempDir();
+	const std::string fifo = dir + "/dockpose_io_fifo_" + std::to_string(::getpid());
+	std::filesystem::remove(fifo);
+	ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0) << std::strerror(errno);
+	const auto from_fifo = loadCameraIntrinsics(fifo);
+	EXPECT_EQ(from_fifo.message(), fifo + ": is not a regular file (a device, FIFO or socket)");
+	std::filesystem::remove(fifo);
+
+	const std::string big = dir + "/dockpose_io_big_" + std::to_string(::getpid()) + ".json";
+	{
+		std::ofstream out(big, std::ios::binary);
+		out << "{\"points\": [" << std::string(kMaxTextFileBytes, ' ') << "]}";
+	}
+	const auto too_big = loadTargetModel(big);
+	EXPECT_NE(too_big.message().find(": is " + std::to_string(kMaxTextFileBytes + 14) +
+					 " bytes; a target, camera or board file has at most " +
+					 std::to_string(kMaxTextFileBytes)),
+		  std::string::npos)
+		<< too_big.message();
+	std::filesystem::remove(big);
 }
 
 TEST(Pgm, HandMadeFileWithCommentsAndOddWhitespace)

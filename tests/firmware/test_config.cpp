@@ -534,6 +534,23 @@ TEST_F(ConfigTest, ParseErrorNamesTheFileAndPosition)
 	EXPECT_EQ(r.errors[0].find("json.exception"), std::string::npos) << r.errors[0];
 }
 
+TEST_F(ConfigTest, ANumberBeyondADoubleIsAnErrorNamingItsKey)
+{
+	/* nlohmann's parser throws out_of_range (not parse_error) for 1e400: it was a crash. */
+	const ConfigResult r = loadText(
+		"{ \"board\": \"sim\", \"camera\": { \"backend\": \"synthetic\", \"exposure_us\": 1e400 } }",
+		"x.json");
+	ASSERT_EQ(r.errors.size(), 1u) << joinErrors(r.errors);
+	EXPECT_EQ(r.errors[0],
+		  (dir_ / "x.json").string() +
+			  ": camera.exposure_us: a number beyond the range of a double "
+			  "(number overflow parsing '1e400')");
+	const ConfigResult top = loadText("{ \"board\": -2e999 }", "y.json");
+	ASSERT_EQ(top.errors.size(), 1u) << joinErrors(top.errors);
+	EXPECT_THAT(top.errors[0],
+		    HasSubstr("y.json: board: a number beyond the range of a double"));
+}
+
 TEST_F(ConfigTest, MissingFileIsNamed)
 {
 	const ConfigResult r = loadBoardConfig((dir_ / "absent.json").string());
