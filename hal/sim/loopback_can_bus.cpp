@@ -66,7 +66,7 @@ void LoopbackHub::detach(LoopbackCanBus *endpoint)
 			 endpoints_.end());
 }
 
-LoopbackCanBus::LoopbackCanBus(std::shared_ptr<LoopbackHub> hub, std::string name)
+LoopbackCanBus::LoopbackCanBus(std::shared_ptr<LoopbackHub> hub, const std::string &name)
 	: CanBusBase("loopback CAN bus " + name),
 	  hub_(std::move(hub))
 {

@@ -80,7 +80,7 @@ class LoopbackCanBus : public CanBusBase
 public:
 	static constexpr std::size_t kRxCapacity = kMaxRxDepth;
 
-	LoopbackCanBus(std::shared_ptr<LoopbackHub> hub, std::string name = "loop0");
+	LoopbackCanBus(std::shared_ptr<LoopbackHub> hub, const std::string &name = "loop0");
 	~LoopbackCanBus() override;
 
 	Status open(std::span<const CanFilter> filters, const CanOptions &options) override;
