@@ -91,13 +91,52 @@ void onStopSignal(int)
 	g_stop.store(true);
 }
 
+/* "dockposed: signal 11 (fatal): LED off\n", built without snprintf (not async-signal-safe). */
+void writeFatalSignalLine(int sig)
+{
+	char digits[12];
+	int n = 0;
+	unsigned v = static_cast<unsigned>(sig);
+	do {
+		digits[n++] = static_cast<char>('0' + v % 10);
+		v /= 10;
+	} while (v > 0 && n < static_cast<int>(sizeof(digits)) - 1);
+	char number[12];
+	for (int i = 0; i < n; ++i)
+		number[i] = digits[n - 1 - i];
+	number[n] = '\0';
+	writeAll("dockposed: signal ");
+	writeAll(number);
+	writeAll(g_strobe ? " (fatal): LED off\n" : " (fatal)\n");
+}
+
 void onFatalSignal(int sig)
 {
 	if (g_strobe)
 		g_strobe->forceOff();
+	writeFatalSignalLine(sig);
 	/* SA_RESETHAND restored the default action: die of the same signal. */
 	raise(sig);
 }
+
+/*
+ * Every signal whose default action ends the process is one of these (signal(7)), so
+ * none can end it with the LED left on:
+ *  - a request to stop (SIGPWR: the power is failing): a clean shutdown, LED off, the
+ *    SHUTDOWN status frame, exit 0;
+ *  - a fault, or a limit the kernel enforces (its default dumps core): LED off at once,
+ *    a line on stderr, then death by the same signal (systemd sees it and restarts);
+ *  - signals a stray kill or a library may send that ask nothing of a sensor: ignored, the
+ *    sensor keeps running. SIGALRM is start-up's watchdog until start-up ends
+ *    (ignoreStrayAlarms()), SIGKILL and SIGSTOP cannot be caught (the board README: the
+ *    hardware keeps the LED off without the process).
+ */
+constexpr int kStopSignals[] = { SIGTERM, SIGINT, SIGHUP, SIGPWR };
+constexpr int kFatalSignals[] = { SIGSEGV, SIGBUS,  SIGFPE, SIGILL,  SIGABRT,
+				  SIGQUIT, SIGTRAP, SIGSYS, SIGXCPU, SIGXFSZ };
+constexpr int kIgnoredSignals[] = {
+	SIGPIPE, SIGUSR1, SIGUSR2, SIGIO, SIGVTALRM, SIGPROF, SIGSTKFLT
+};
 
 void installSignalHandlers()
 {
@@ -105,7 +144,7 @@ void installSignalHandlers()
 	};
 	stop.sa_handler = onStopSignal;
 	sigemptyset(&stop.sa_mask);
-	for (int sig : { SIGTERM, SIGINT, SIGHUP })
+	for (int sig : kStopSignals)
 		sigaction(sig, &stop, nullptr);
 
 	struct sigaction fatal {
@@ -113,10 +152,21 @@ void installSignalHandlers()
 	fatal.sa_handler = onFatalSignal;
 	sigemptyset(&fatal.sa_mask);
 	fatal.sa_flags = static_cast<int>(SA_RESETHAND);
-	for (int sig : { SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT })
+	for (int sig : kFatalSignals)
 		sigaction(sig, &fatal, nullptr);
 
-	std::signal(SIGPIPE, SIG_IGN);
+	for (int sig : kIgnoredSignals)
+		std::signal(sig, SIG_IGN);
+	/* The real-time signals glibc leaves to applications (it keeps those below SIGRTMIN). */
+	for (int sig = SIGRTMIN; sig <= SIGRTMAX; ++sig)
+		std::signal(sig, SIG_IGN);
+}
+
+/* Start-up is over: a SIGALRM from now on is a stray one, not the watchdog's. */
+void ignoreStrayAlarms()
+{
+	::alarm(0);
+	std::signal(SIGALRM, SIG_IGN);
 }
 
 bool contains(std::span<const char *const> names, const std::string &name)
@@ -135,7 +185,6 @@ std::string join(std::span<const char *const> names)
 	return out;
 }
 
-/* The daemon itself; main() turns an exception that escapes it into exit 70. */
 /* The command line. */
 struct Options {
 	std::string board_path;
@@ -281,17 +330,18 @@ int runBoard(const Options &options, const dockpose::board::BoardInfo &info,
 	} strobe_for_signals(daemon.strobe());
 	g_startup_step.store("starting the camera, strobe and CAN");
 	if (auto s = daemon.start(); !s) {
-		::alarm(0);
+		ignoreStrayAlarms();
 		std::fprintf(stderr, "dockposed: cannot start: %s\n", s.message().c_str());
 		daemon.shutdown();
 		return 1;
 	}
-	::alarm(0);
+	ignoreStrayAlarms();
 	const int status = daemon.run(g_stop, options.run_for_s);
 	daemon.printSummary(stderr);
 	return status;
 }
 
+/* The daemon itself; main() turns an exception that escapes it into exit 70. */
 int run(int argc, char **argv)
 {
 	Options options;

@@ -8,11 +8,13 @@
 #include <sys/wait.h>
 
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -125,6 +127,78 @@ TEST_F(Dockposed, SigtermShutsDownCleanlyWithALastStatusFrame)
 	const auto reports = decode(log);
 	ASSERT_FALSE(reports.empty());
 	EXPECT_EQ(reports.back().at("state").get<std::string>(), "SHUTDOWN");
+}
+
+/*
+ * dockposed on the sim board, sent each of `signals` once it runs (its CAN log has frames),
+ * then 1 s to react. Still running then: alive is set and it gets SIGTERM. The status is
+ * 128 + N when a signal N ended it.
+ */
+struct SignalRun {
+	RunResult result;
+	bool alive = false;
+};
+
+TEST_F(Dockposed, EverySignalThatEndsAProcessIsHandledOrIgnored)
+{
+	auto runAndSignal = [&](const std::vector<int> &signals) {
+		const std::string log = dir_ + "/can.log";
+		const std::string alive = dir_ + "/alive";
+		std::remove(log.c_str());
+		std::remove(alive.c_str());
+		std::string kills;
+		for (int sig : signals)
+			kills += "kill -" + std::to_string(sig) + " $pid; ";
+		/* ulimit -c 0: the fatal signals' default dumps core. */
+		const std::string script =
+			"ulimit -c 0; " + std::string(DOCKPOSED) + " --board " + kSimBoard +
+			" --for 30 --can-log '" + log + "' 2>'" + dir_ +
+			"/stderr.txt' & pid=$!; i=0; " + "while [ ! -s '" + log +
+			"' ] && [ $i -lt 300 ]; do sleep 0.1; i=$((i+1)); done; " + "sleep 0.3; " +
+			kills + "sleep 1; kill -0 $pid 2>/dev/null && { : > '" + alive +
+			"'; kill -TERM $pid; }; wait $pid";
+		const std::string sh = dir_ + "/signal.sh";
+		std::ofstream(sh) << script << "\n";
+		SignalRun r;
+		const int raw = std::system(("sh '" + sh + "'").c_str());
+		r.result.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : 128 + WTERMSIG(raw);
+		r.result.err = slurp(dir_ + "/stderr.txt");
+		r.alive = std::ifstream(alive).good();
+		return r;
+	};
+	auto lastState = [&]() {
+		const auto reports = decode(dir_ + "/can.log");
+		return reports.empty() ? std::string("(no report)")
+				       : reports.back().at("state").get<std::string>();
+	};
+
+	/* Ignored: it keeps running through all of them (then SIGTERM ends it cleanly). */
+	std::vector<int> ignored = { SIGPIPE,	SIGUSR1, SIGUSR2,   SIGIO,
+				     SIGVTALRM, SIGPROF, SIGSTKFLT, SIGALRM };
+	for (int sig = SIGRTMIN; sig <= SIGRTMAX; ++sig)
+		ignored.push_back(sig);
+	const SignalRun quiet = runAndSignal(ignored);
+	EXPECT_TRUE(quiet.alive) << quiet.result.err;
+	EXPECT_EQ(quiet.result.status, 0) << quiet.result.err;
+	EXPECT_EQ(quiet.result.err.find("signal"), std::string::npos) << quiet.result.err;
+	EXPECT_EQ(lastState(), "SHUTDOWN");
+
+	/* A stop request: a clean shutdown. */
+	const SignalRun power = runAndSignal({ SIGPWR });
+	EXPECT_FALSE(power.alive);
+	EXPECT_EQ(power.result.status, 0) << power.result.err;
+	EXPECT_EQ(lastState(), "SHUTDOWN");
+
+	/* Fatal: LED off, said on stderr, then death by the same signal. */
+	for (int sig : { SIGQUIT, SIGTRAP, SIGSYS, SIGXCPU, SIGXFSZ, SIGSEGV }) {
+		const SignalRun fatal = runAndSignal({ sig });
+		EXPECT_FALSE(fatal.alive) << sig;
+		EXPECT_EQ(fatal.result.status, 128 + sig) << sig << ": " << fatal.result.err;
+		EXPECT_NE(fatal.result.err.find("dockposed: signal " + std::to_string(sig) +
+						" (fatal): LED off\n"),
+			  std::string::npos)
+			<< sig << ": " << fatal.result.err;
+	}
 }
 
 TEST_F(Dockposed, BadBoardFilesAreRefusedWithTheirErrors)
