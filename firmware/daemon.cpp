@@ -2,8 +2,10 @@
 #include "firmware/daemon.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <string>
+#include <thread>
 
 #include "firmware/modes.h"
 #include "hal/clock.h"
@@ -18,6 +20,9 @@ constexpr std::int64_t kNsPerS = 1000000000;
 constexpr int kWaitSliceMs = 20;
 /* A stalled camera is restarted at most this often. */
 constexpr std::int64_t kRestartIntervalNs = 2 * kNsPerS;
+/* After this many restarts in a row whose start() failed, run() gives up with status 1 (systemd's
+ * Restart=on-failure then starts the whole process afresh). */
+constexpr int kMaxFailedRestarts = 5;
 /*
  * After a change of exposure, gain or strobe mode the pipeline reads this
  * many frames whole (not through windows): new controls reach the sensor a
@@ -165,12 +170,15 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 		handleCommands();
 
 		hal::Frame frame;
+		const std::int64_t wait_start_ns = now_ns;
 		const hal::WaitResult result = backends_.camera->waitFrame(&frame, kWaitSliceMs);
 		now_ns = hal::monotonicNs();
 		if (result == hal::WaitResult::Frame) {
 			handleFrame(frame, now_ns);
 			backends_.camera->releaseFrame(frame);
-		} else if (result == hal::WaitResult::Stopped) {
+		} else if (result == hal::WaitResult::Stopped && !stalled_) {
+			/* Not running without a stall under way: a replay ran out of frames. (During a
+			 * stall it is a camera whose restart failed: handled as the stall.) */
 			std::fprintf(log_, "dockposed: the camera has no more frames\n");
 			break;
 		} else {
@@ -180,6 +188,21 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 					     backends_.camera->lastError().c_str());
 			}
 			handleStall(now_ns);
+			if (failed_restarts_ >= kMaxFailedRestarts) {
+				std::fprintf(
+					log_,
+					"dockposed: the camera failed to restart %d times in a "
+					"row; exiting with status 1\n",
+					failed_restarts_);
+				exit_status = 1;
+				break;
+			}
+			/* An unplugged or stopped camera answers at once: wait out the slice
+			 * rather than spin a core. */
+			const std::int64_t rest_ns =
+				wait_start_ns + kWaitSliceMs * kNsPerMs - hal::monotonicNs();
+			if (rest_ns > 0)
+				std::this_thread::sleep_for(std::chrono::nanoseconds(rest_ns));
 		}
 
 		/* A frame may have taken a while (the pipeline): heartbeat and watchdog at the time now. */
@@ -269,6 +292,7 @@ bool Daemon::acceptFrame(const hal::Frame &frame, std::int64_t now_ns)
 			     static_cast<unsigned long long>(frame.sequence));
 		stalled_ = false;
 		camera_failed_ = false;
+		failed_restarts_ = 0;
 		applyStrobeMode(strobe_mode_);
 	}
 	last_frame_ns_ = now_ns;
@@ -433,10 +457,12 @@ void Daemon::handleStall(std::int64_t now_ns)
 		backends_.camera->stop();
 		if (auto s = backends_.camera->start(); s) {
 			++stats_.camera_restarts;
+			failed_restarts_ = 0;
 			std::fprintf(log_, "dockposed: camera restarted\n");
 		} else {
-			std::fprintf(log_, "dockposed: camera restart failed: %s\n",
-				     s.message().c_str());
+			++failed_restarts_;
+			std::fprintf(log_, "dockposed: camera restart failed (%d of %d): %s\n",
+				     failed_restarts_, kMaxFailedRestarts, s.message().c_str());
 		}
 	}
 }
@@ -563,8 +589,10 @@ void Daemon::applyCommand(const can::CommandData &command)
 			     enabled_ ? "enabled" : "disabled",
 			     mode == TrackMode::Track ? "track" : "search only",
 			     strobeModeName(strobe), exposure_us_, gain_);
+		applyStrobeMode(strobe);
 	}
-	applyStrobeMode(strobe);
+	/* An unchanged command changes nothing: controllers repeat theirs cyclically, and
+	 * re-applying the strobe mode would restart alternate mode's schedule every time. */
 }
 
 void Daemon::applyStrobeMode(StrobeMode mode)

@@ -146,6 +146,7 @@ private:
 	std::int64_t start_ns_ = 0;
 	bool stalled_ = false;
 	bool camera_failed_ = false;
+	int failed_restarts_ = 0; /* restarts in a row whose start() failed */
 	std::int64_t last_stall_report_ns_ = 0;
 	std::int64_t last_restart_ns_ = 0;
 	std::int64_t next_heartbeat_ns_ = 0;

@@ -93,8 +93,22 @@ Status SimCameraBase::setup(const CameraConfig &config, int width, int height)
 	return Status::ok();
 }
 
+void SimCameraBase::setDisconnected(bool disconnected)
+{
+	if (disconnected)
+		(void)fail(name() + ": disconnected");
+	disconnected_.store(disconnected, std::memory_order_relaxed);
+	frame_ready_.notify_all();
+}
+
 Status SimCameraBase::start()
 {
+	if (disconnected_.load(std::memory_order_relaxed))
+		return fail(name() + ": disconnected");
+	if (int n = failing_starts_.load(std::memory_order_relaxed); n > 0) {
+		failing_starts_.store(n - 1, std::memory_order_relaxed);
+		return fail(name() + ": start() failed (test)");
+	}
 	if (running_.load())
 		return Status::ok();
 	if (buffers_.empty())
@@ -180,7 +194,8 @@ void SimCameraBase::run()
 		std::int64_t start_ns = t0 + static_cast<std::int64_t>(n) * period;
 		if (!sleepUntil(start_ns + exposure_ns))
 			break;
-		if (stall_.load(std::memory_order_relaxed)) {
+		if (stall_.load(std::memory_order_relaxed) ||
+		    disconnected_.load(std::memory_order_relaxed)) {
 			++n; /* the camera hangs: nothing comes out */
 			continue;
 		}
@@ -250,6 +265,8 @@ WaitResult SimCameraBase::waitFrame(Frame *frame, int timeout_ms)
 
 	std::unique_lock<std::mutex> lock(mutex_);
 	for (;;) {
+		if (disconnected_.load(std::memory_order_relaxed))
+			return WaitResult::Error; /* lastError() set by setDisconnected() */
 		std::int32_t slot;
 		if (queue_.pop(&slot))
 			return deliver(slot);

@@ -22,6 +22,12 @@
  *  - setStall(true) (test hook) produces nothing while it holds: the camera
  *    hangs, waitFrame() times out; the grid goes on, so frames after the
  *    stall show a gap.
+ *  - setDisconnected(true) (test hook) is an unplugged camera: waitFrame()
+ *    returns Error at once (a real backend's disconnect), start() fails, and
+ *    both say "<name>: disconnected" in lastError(); setDisconnected(false)
+ *    plugs it back: a start() then works.
+ *  - failStarts(n) (test hook): the next n start() calls fail ("<name>:
+ *    start() failed (test)"), as a device that answers but cannot stream.
  *
  * configure() (only while stopped) reallocates the buffers: frames from
  * before it are gone. stop() releases every frame; a start() after it begins
@@ -81,6 +87,8 @@ public:
 
 	/* Test hook: while true the camera delivers nothing (it hangs). */
 	void setStall(bool stall) { stall_.store(stall, std::memory_order_relaxed); }
+	void setDisconnected(bool disconnected);
+	void failStarts(int n) { failing_starts_.store(n < 0 ? 0 : n, std::memory_order_relaxed); }
 
 	/* The frame period after configure(), ns. */
 	std::int64_t periodNs() const { return period_ns_; }
@@ -146,6 +154,8 @@ private:
 	std::atomic<int> exposure_us_{ 2000 };
 	std::atomic<double> gain_{ 1.0 };
 	std::atomic<bool> stall_{ false };
+	std::atomic<bool> disconnected_{ false };
+	std::atomic<int> failing_starts_{ 0 };
 
 	std::thread thread_;
 	std::int64_t t0_ns_ = 0;

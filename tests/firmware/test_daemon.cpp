@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <memory>
 #include <thread>
 #include <vector>
@@ -337,6 +338,136 @@ TEST(Daemon, CameraStallReportsFaultAndSwitchesTheLedOff)
 	EXPECT_TRUE(rig.strobe_->isOn());
 	rig.stop();
 	EXPECT_GE(rig.daemon_->stats().stalls, 1u);
+}
+
+/* CPU seconds the whole process used so far (every thread). */
+double processCpuS()
+{
+	timespec ts{};
+	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+	return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) * 1e-9;
+}
+
+bool lastReportHasFault(const Rig &rig, std::uint8_t fault)
+{
+	return !rig.reports_.empty() &&
+	       rig.reports_.back().status.state == can::SensorState::Fault &&
+	       (rig.reports_.back().status.faults & fault);
+}
+
+TEST(Daemon, ARepeatedIdenticalCommandChangesNothing)
+{
+	/* Controllers send their command cyclically. Each one restarted the alternate strobe's
+	 * schedule (period estimate, the unlit frame), so a controller repeating it every 30 ms
+	 * starved alternate mode of poses. */
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	Rig rig(config);
+	rig.start();
+	can::CommandData alternate;
+	alternate.strobe = can::StrobeMode::Alternate;
+	rig.sendCommand(alternate);
+	auto alternatePoses = [&] {
+		int n = 0;
+		for (const auto &r : rig.reports_)
+			n += r.status.strobe == can::StrobeMode::Alternate && r.pose_valid;
+		return n;
+	};
+	ASSERT_TRUE(rig.waitFor([&] { return alternatePoses() >= 10; }, 30s))
+		<< "no valid poses in alternate mode";
+
+	const int before = alternatePoses();
+	const std::uint64_t commands_before = rig.daemon_->stats().commands;
+	const auto end = std::chrono::steady_clock::now() + 3s;
+	int sent = 0;
+	while (std::chrono::steady_clock::now() < end) {
+		rig.sendCommand(alternate);
+		++sent;
+		std::this_thread::sleep_for(30ms);
+		rig.drain();
+	}
+	const int during = alternatePoses() - before;
+	rig.stop();
+	EXPECT_GE(rig.daemon_->stats().commands - commands_before,
+		  static_cast<std::uint64_t>(sent) / 2)
+		<< "the commands were not received";
+	/* 60 frames/s, every other one lit: at most 90 poses in 3 s; 79 and 83 measured here,
+	 * 36 when each repeat restarted the schedule. */
+	EXPECT_GE(during, 60) << "valid poses in 3 s of a command repeated every 30 ms";
+}
+
+TEST(Daemon, ACameraThatCannotRestartEndsTheRunWithStatus1WithoutSpinning)
+{
+	/* A stall, then every restart's start() fails (the camera stops, then cannot stream): the
+	 * loop waited on a camera that answers "stopped" at once, and ended as if a replay had run
+	 * out, with status 0 (systemd's Restart=on-failure never restarted it). */
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	config.camera.stall_timeout_ms = 200;
+	Rig rig(config);
+	rig.start();
+	ASSERT_TRUE(rig.waitFor(
+		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+
+	rig.camera_->failStarts(1000);
+	rig.camera_->setStall(true);
+	ASSERT_TRUE(
+		rig.waitFor([&] { return lastReportHasFault(rig, can::fault::kCameraStall); }, 5s));
+	EXPECT_FALSE(rig.strobe_->isOn());
+	const double cpu0 = processCpuS();
+	const auto wall0 = std::chrono::steady_clock::now();
+	/* Five restarts, 2 s apart. */
+	ASSERT_TRUE(rig.waitFor([&] { return rig.finished_.load(); }, 30s))
+		<< "the daemon kept running on a camera that cannot start";
+	const double wall_s =
+		std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+	const double cpu_s = processCpuS() - cpu0;
+	EXPECT_EQ(rig.exit_status_, 1);
+	EXPECT_GE(wall_s, 6.0) << "gave up before its restarts";
+	/* A spinning loop takes a whole core; a waiting one a few per cent (one check per 20 ms). */
+	EXPECT_LT(cpu_s, 0.3 * wall_s) << cpu_s << " CPU s in " << wall_s << " s";
+	EXPECT_FALSE(rig.strobe_->isOn());
+	/* Status frames with the fault kept coming until the end. */
+	EXPECT_TRUE(lastReportHasFault(rig, can::fault::kCameraStall) ||
+		    (!rig.reports_.empty() &&
+		     rig.reports_.back().status.state == can::SensorState::Shutdown));
+}
+
+TEST(Daemon, AnUnpluggedCameraIsAFaultUntilItIsPluggedBack)
+{
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	config.camera.stall_timeout_ms = 200;
+	Rig rig(config);
+	rig.start();
+	ASSERT_TRUE(rig.waitFor(
+		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+
+	rig.camera_->setDisconnected(true);
+	ASSERT_TRUE(
+		rig.waitFor([&] { return lastReportHasFault(rig, can::fault::kCameraError); }, 5s))
+		<< "no camera-error status after the unplug";
+	EXPECT_FALSE(rig.strobe_->isOn());
+	/* waitFrame() returns an error at once now: the loop must wait, not spin. */
+	const double cpu0 = processCpuS();
+	const auto wall0 = std::chrono::steady_clock::now();
+	std::this_thread::sleep_for(3s); /* at least one restart, which fails */
+	const double wall_s =
+		std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+	const double cpu_s = processCpuS() - cpu0;
+	EXPECT_LT(cpu_s, 0.3 * wall_s) << cpu_s << " CPU s in " << wall_s << " s";
+	rig.drain();
+	EXPECT_TRUE(lastReportHasFault(rig, can::fault::kCameraError));
+	EXPECT_FALSE(rig.finished_.load());
+
+	rig.camera_->setDisconnected(false);
+	ASSERT_TRUE(rig.waitFor(
+		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s))
+		<< "no pose after the camera was plugged back";
+	EXPECT_TRUE(rig.strobe_->isOn());
+	rig.stop();
+	EXPECT_EQ(rig.exit_status_, 0);
+	EXPECT_GE(rig.daemon_->stats().camera_restarts, 1u);
 }
 
 TEST(Daemon, FullCanQueueDropsAndCountsWhileTheLoopKeepsRate)
