@@ -26,6 +26,44 @@ Status CameraIntrinsics::validate() const
 		 std::abs(p1) > 1.0 || std::abs(p2) > 1.0)
 		err << "camera distortion k1=" << k1 << " k2=" << k2 << " p1=" << p1 << " p2=" << p2
 		    << " is out of range";
+	else if (Status s = checkPlausible(); !s.isOk())
+		return s;
+	else
+		return Status::ok();
+	return Status::error(err.str());
+}
+
+Status CameraIntrinsics::checkPlausible() const
+{
+	std::ostringstream err;
+	const double fov_x_deg = 2.0 * std::atan(0.5 * width / fx) * 180.0 / M_PI;
+	const double fov_y_deg = 2.0 * std::atan(0.5 * height / fy) * 180.0 / M_PI;
+	const double aspect = fy / fx;
+	/* The image corner farthest from the principal point, in normalised (distorted)
+	 * coordinates, and the radial factor there: how much the model scales the corners. */
+	double r2_max = 0.0;
+	for (const double u : { 0.0, static_cast<double>(width) })
+		for (const double v : { 0.0, static_cast<double>(height) }) {
+			const double x = (u - cx) / fx, y = (v - cy) / fy;
+			r2_max = std::max(r2_max, x * x + y * y);
+		}
+	const double corner_factor = 1.0 + k1 * r2_max + k2 * r2_max * r2_max;
+	if (!(fov_x_deg >= kMinFieldOfViewDeg && fov_x_deg <= kMaxFieldOfViewDeg &&
+	      fov_y_deg >= kMinFieldOfViewDeg && fov_y_deg <= kMaxFieldOfViewDeg))
+		err << "camera field of view " << fov_x_deg << " x " << fov_y_deg
+		    << " degrees (fx=" << fx << ", fy=" << fy << " on " << width << "x" << height
+		    << ") is not a lens's: each must be in [" << kMinFieldOfViewDeg << ", "
+		    << kMaxFieldOfViewDeg << "]";
+	else if (!(aspect >= 1.0 / kMaxPixelAspect && aspect <= kMaxPixelAspect))
+		err << "camera pixel aspect fy/fx = " << aspect << " (fx=" << fx << ", fy=" << fy
+		    << ") is not a sensor's: it must be in [" << 1.0 / kMaxPixelAspect << ", "
+		    << kMaxPixelAspect << "]";
+	else if (!(corner_factor >= 1.0 / kMaxCornerDistortion &&
+		   corner_factor <= kMaxCornerDistortion))
+		err << "camera distortion k1=" << k1 << " k2=" << k2
+		    << " scales the image corners by " << corner_factor
+		    << "; a lens's stays within [" << 1.0 / kMaxCornerDistortion << ", "
+		    << kMaxCornerDistortion << "]";
 	else
 		return Status::ok();
 	return Status::error(err.str());

@@ -37,8 +37,24 @@ struct CameraIntrinsics {
 		}
 	} sigma;
 
+	/*
+	 * Plausibility bounds no real camera leaves (a camera file outside them is a typo or a
+	 * unit mix-up, and would give wrong poses): the field of view across each side, the
+	 * pixel aspect fy/fx, and the radial factor 1 + k1 r^2 + k2 r^4 at the image corner
+	 * farthest from the principal point (r from the distorted corner, an approximation
+	 * that is exact without distortion).
+	 */
+	static constexpr double kMinFieldOfViewDeg = 0.5;
+	static constexpr double kMaxFieldOfViewDeg = 175.0;
+	static constexpr double kMaxPixelAspect = 2.0;
+	static constexpr double kMaxCornerDistortion = 4.0;
+
 	/* Ok when valid, else an error naming the bad value. Allocates: the message. */
 	Status validate() const;
+
+private:
+	/* validate()'s plausibility bounds, once each value is in its own range. */
+	Status checkPlausible() const;
 };
 
 class CameraModel

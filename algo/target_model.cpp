@@ -115,6 +115,13 @@ Status TargetModel::validate() const
 					     "' has a non-finite LED coordinate");
 
 	const double diameter = diameterMm();
+	if (!(diameter >= kMinDiameterMm && diameter <= kMaxDiameterMm)) {
+		err << "target '" << name << "' is " << diameter
+		    << " mm across; a docking target's "
+		    << "LEDs span " << kMinDiameterMm << " mm to " << kMaxDiameterMm
+		    << " mm (coordinates are in mm)";
+		return Status::error(err.str());
+	}
 	for (std::size_t i = 0; i < points_mm.size(); ++i)
 		for (std::size_t j = i + 1; j < points_mm.size(); ++j)
 			if ((points_mm[i] - points_mm[j]).norm() < 1e-3 * diameter) {

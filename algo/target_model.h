@@ -37,9 +37,15 @@ struct TargetModel {
 		double max_deg = 180.0;
 	} approach;
 
+	/* A target's size (diameterMm()) lies in these bounds: smaller is a unit mix-up (metres
+	 * for mm) or coincident LEDs, larger no docking target. */
+	static constexpr double kMinDiameterMm = 1.0;
+	static constexpr double kMaxDiameterMm = 100000.0;
+
 	/*
-	 * Check the model: capacities, indices in range, distinct LEDs, every
-	 * face planar (within tolerance), convex and non-degenerate.
+	 * Check the model: capacities, indices in range, a size in [kMinDiameterMm,
+	 * kMaxDiameterMm], distinct LEDs, every face planar (within tolerance), convex and
+	 * non-degenerate.
 	 * Ok when valid, else an error whose message names the problem.
 	 * Allocates: the error message only.
 	 */
