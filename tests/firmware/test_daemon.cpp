@@ -46,6 +46,15 @@ BoardConfig simConfig()
 	return config;
 }
 
+/* The sim board looping its approach, a stall declared after 200 ms. */
+BoardConfig stallConfig()
+{
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	config.camera.stall_timeout_ms = 200;
+	return config;
+}
+
 /* A test rig: the daemon on simulated backends, running in its own thread, and the
  * controller's end of the bus. */
 class Rig
@@ -135,6 +144,13 @@ public:
 		}
 		drain();
 		return pred();
+	}
+
+	/* Until the latest report holds a valid pose, or the timeout passes. */
+	bool waitForValidPose(std::chrono::milliseconds timeout)
+	{
+		return waitFor([this] { return !reports_.empty() && reports_.back().pose_valid; },
+			       timeout);
 	}
 
 	void sendCommand(const can::CommandData &command)
@@ -296,8 +312,7 @@ TEST(Daemon, CommandFramesChangeModeStrobeAndEnable)
 
 	can::CommandData enable;
 	rig.sendCommand(enable);
-	ASSERT_TRUE(rig.waitFor(
-		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 30s));
+	ASSERT_TRUE(rig.waitForValidPose(30s));
 	rig.stop();
 	EXPECT_GE(rig.daemon_->stats().commands, 3u);
 	EXPECT_GE(rig.daemon_->stats().commands_rejected, 1u);
@@ -305,13 +320,10 @@ TEST(Daemon, CommandFramesChangeModeStrobeAndEnable)
 
 TEST(Daemon, CameraStallReportsFaultAndSwitchesTheLedOff)
 {
-	BoardConfig config = simConfig();
-	config.camera.synthetic.loop = true;
-	config.camera.stall_timeout_ms = 200;
+	const BoardConfig config = stallConfig();
 	Rig rig(config);
 	rig.start();
-	ASSERT_TRUE(rig.waitFor(
-		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+	ASSERT_TRUE(rig.waitForValidPose(10s));
 	EXPECT_TRUE(rig.strobe_->isOn());
 
 	rig.camera_->setStall(true);
@@ -332,9 +344,7 @@ TEST(Daemon, CameraStallReportsFaultAndSwitchesTheLedOff)
 	EXPECT_GT(rig.reports_.size(), during);
 
 	rig.camera_->setStall(false);
-	ASSERT_TRUE(rig.waitFor(
-		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s))
-		<< "no recovery after the stall";
+	ASSERT_TRUE(rig.waitForValidPose(10s)) << "no recovery after the stall";
 	EXPECT_TRUE(rig.strobe_->isOn());
 	rig.stop();
 	EXPECT_GE(rig.daemon_->stats().stalls, 1u);
@@ -401,13 +411,10 @@ TEST(Daemon, ACameraThatCannotRestartEndsTheRunWithStatus1WithoutSpinning)
 	/* A stall, then every restart's start() fails (the camera stops, then cannot stream): the
 	 * loop waited on a camera that answers "stopped" at once, and ended as if a replay had run
 	 * out, with status 0 (systemd's Restart=on-failure never restarted it). */
-	BoardConfig config = simConfig();
-	config.camera.synthetic.loop = true;
-	config.camera.stall_timeout_ms = 200;
+	const BoardConfig config = stallConfig();
 	Rig rig(config);
 	rig.start();
-	ASSERT_TRUE(rig.waitFor(
-		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+	ASSERT_TRUE(rig.waitForValidPose(10s));
 
 	rig.camera_->failStarts(1000);
 	rig.camera_->setStall(true);
@@ -435,13 +442,10 @@ TEST(Daemon, ACameraThatCannotRestartEndsTheRunWithStatus1WithoutSpinning)
 
 TEST(Daemon, AnUnpluggedCameraIsAFaultUntilItIsPluggedBack)
 {
-	BoardConfig config = simConfig();
-	config.camera.synthetic.loop = true;
-	config.camera.stall_timeout_ms = 200;
+	const BoardConfig config = stallConfig();
 	Rig rig(config);
 	rig.start();
-	ASSERT_TRUE(rig.waitFor(
-		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+	ASSERT_TRUE(rig.waitForValidPose(10s));
 
 	rig.camera_->setDisconnected(true);
 	ASSERT_TRUE(
@@ -461,9 +465,7 @@ TEST(Daemon, AnUnpluggedCameraIsAFaultUntilItIsPluggedBack)
 	EXPECT_FALSE(rig.finished_.load());
 
 	rig.camera_->setDisconnected(false);
-	ASSERT_TRUE(rig.waitFor(
-		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s))
-		<< "no pose after the camera was plugged back";
+	ASSERT_TRUE(rig.waitForValidPose(10s)) << "no pose after the camera was plugged back";
 	EXPECT_TRUE(rig.strobe_->isOn());
 	rig.stop();
 	EXPECT_EQ(rig.exit_status_, 0);
@@ -477,8 +479,7 @@ TEST(Daemon, FullCanQueueDropsAndCountsWhileTheLoopKeepsRate)
 	config.can.tx_queue_depth = 8;
 	Rig rig(config);
 	rig.start();
-	ASSERT_TRUE(rig.waitFor(
-		[&] { return !rig.reports_.empty() && rig.reports_.back().pose_valid; }, 10s));
+	ASSERT_TRUE(rig.waitForValidPose(10s));
 
 	const std::uint64_t frames_before = rig.daemon_->stats().frames;
 	const Pose before_pose = rig.camera_->truthAt(0);
