@@ -87,6 +87,9 @@ struct CanSection : hal::CanOptions {
 	std::uint32_t base_id = 0x300; /* 11-bit; base_id .. base_id + 0x10 are used */
 	int bitrate = 500000; /* the bus's bit rate, for the bus-load check and docs */
 	int heartbeat_hz = 10;
+	/* A report still waiting for the bus this long after it was queued is dropped unsent
+	 * (CanStats::tx_expired); 0: one camera frame period. */
+	int max_report_age_us = 0;
 };
 
 struct PipelineSection {

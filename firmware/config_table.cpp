@@ -330,6 +330,15 @@ const Field<CanSection> kCanFields[] = {
 	  .doc = "Rate of the status (heartbeat) frames.",
 	  .range = { 1, 100 },
 	  .unit = "Hz" },
+	{ .key = "max_report_age_us",
+	  .kind = Kind::Integer,
+	  .member = &CanSection::max_report_age_us,
+	  .doc = "How long a pose report may wait for the bus (a stall, bus-off, ENOBUFS): one "
+		 "still queued this long after it was sent is dropped unsent, so no stale pose "
+		 "goes out as valid. 0: one camera frame period (by then the next report exists). "
+		 "Status-only reports and heartbeats expire after one heartbeat interval.",
+	  .range = { 0, 1000000 },
+	  .unit = "us" },
 };
 
 const Field<PipelineSection> kPipelineFields[] = {

@@ -30,9 +30,10 @@ constexpr int kMaxFailedRestarts = 5;
  */
 constexpr int kWholeFramesAfterLightChange = 4;
 
-hal::CanFrame toHal(const can::RawFrame &raw)
+hal::CanFrame toHal(const can::RawFrame &raw, std::int64_t deadline_ns)
 {
 	hal::CanFrame frame;
+	frame.deadline_ns = deadline_ns;
 	frame.id = raw.id;
 	frame.len = raw.len;
 	std::copy(raw.data.begin(), raw.data.end(), frame.data.begin());
@@ -54,9 +55,19 @@ PipelineConfig pipelineConfig(const PipelineSection &section)
 	return config;
 }
 
+/* The configuration requires a fixed rate (frame_rate_hz > 0). */
 std::int64_t framePeriodNs(const BoardConfig &config)
 {
-	return static_cast<std::int64_t>(1e9 / config.camera.frame_rate_hz);
+	return static_cast<std::int64_t>(config.camera.frameDurationUs()) * 1000;
+}
+
+/* How long a report may wait for the bus: can.max_report_age_us, 0 meaning one frame period
+ * (by then the next frame's report exists). */
+std::int64_t reportMaxAgeNs(const BoardConfig &config)
+{
+	return config.can.max_report_age_us > 0
+		       ? static_cast<std::int64_t>(config.can.max_report_age_us) * 1000
+		       : framePeriodNs(config);
 }
 
 /* Frames of the camera model's size; none when the model was not loaded (start() refuses). */
@@ -90,7 +101,9 @@ Daemon::Daemon(const BoardConfig &config, board::Backends backends, std::FILE *l
 	  track_mode_(config.pipeline.mode),
 	  exposure_us_(config.camera.exposure_us),
 	  gain_(config.camera.analogue_gain),
-	  period_ns_(framePeriodNs(config))
+	  period_ns_(framePeriodNs(config)),
+	  report_max_age_ns_(reportMaxAgeNs(config)),
+	  heartbeat_interval_ns_(kNsPerS / std::max(1, config.can.heartbeat_hz))
 {
 	/* The configuration was validated: both models loaded (an empty one is a bug upstream,
 	 * reported by start()). */
@@ -237,7 +250,7 @@ void Daemon::shutdown()
 	logState(before, state_machine_.state(), last_sequence_);
 	can::StatusData status = statusFor(can::SensorState::Shutdown, last_faults_);
 	status.strobe = can::StrobeMode::Off;
-	sendReport(status, nullptr);
+	sendReport(status, nullptr, 0); /* no deadline: the last word, however late */
 	/* Give the last frames a moment to leave a busy queue, without hanging. */
 	for (int i = 0; i < 50 && backends_.can->stats().tx_queued > 0; ++i) {
 		backends_.can->poll();
@@ -416,12 +429,15 @@ void Daemon::reportFrame(const hal::Frame &frame, const PoseResult *result)
 		pose.log10_nfa = result->log10_nfa;
 	}
 
-	/* Latency up to this send, from the start of the exposure. */
+	/* Latency up to this send, from the start of the exposure; the report is dated with the
+	 * send time and leaves within report_max_age_ns_ of it or not at all. */
 	const std::int64_t send_ns = hal::monotonicNs();
 	const std::int64_t latency_ns = frame.timestamp_ns > 0 ? send_ns - frame.timestamp_ns : 0;
 	status.latency_ms = static_cast<double>(latency_ns) * 1e-6;
+	pose.sensor_time_us = static_cast<std::uint32_t>(send_ns / 1000);
 
-	const int n = sendReport(status, pose_valid ? &pose : nullptr);
+	const int n =
+		sendReport(status, pose_valid ? &pose : nullptr, send_ns + report_max_age_ns_);
 	++stats_.reports;
 	if (n > 1)
 		++stats_.poses_valid;
@@ -446,8 +462,7 @@ void Daemon::handleStall(std::int64_t now_ns)
 		last_restart_ns_ = now_ns;
 	}
 	/* Status keeps coming, at the heartbeat rate, so the controller sees the fault. */
-	const std::int64_t interval_ns = kNsPerS / std::max(1, config_.can.heartbeat_hz);
-	if (now_ns - last_stall_report_ns_ >= interval_ns) {
+	if (now_ns - last_stall_report_ns_ >= heartbeat_interval_ns_) {
 		sendStatusOnly(now_ns);
 		last_stall_report_ns_ = now_ns;
 	}
@@ -473,13 +488,14 @@ void Daemon::sendStatusOnly(std::int64_t now_ns)
 	const SensorState before = state_machine_.state();
 	const SensorState state = state_machine_.update({ false, faults });
 	logState(before, state, last_sequence_);
-	sendReport(statusFor(state, faults), nullptr);
+	/* Outdated by the next one, a heartbeat interval later. */
+	sendReport(statusFor(state, faults), nullptr, now_ns + heartbeat_interval_ns_);
 	++stats_.stall_reports;
 }
 
 void Daemon::sendHeartbeat(std::int64_t now_ns)
 {
-	next_heartbeat_ns_ = now_ns + kNsPerS / std::max(1, config_.can.heartbeat_hz);
+	next_heartbeat_ns_ = now_ns + heartbeat_interval_ns_;
 	if (now_ns - rate_start_ns_ >= kNsPerS) {
 		frame_rate_hz_ = static_cast<double>(rate_frames_) * 1e9 /
 				 static_cast<double>(now_ns - rate_start_ns_);
@@ -495,7 +511,7 @@ void Daemon::sendHeartbeat(std::int64_t now_ns)
 	hb.faults = activeFaults(now_ns);
 	hb.frame_rate_hz = frame_rate_hz_;
 	const can::RawFrame frame = encoder_.encodeHeartbeat(hb);
-	sendFrames(&frame, 1);
+	sendFrames(&frame, 1, next_heartbeat_ns_);
 	++stats_.heartbeats;
 }
 
@@ -512,18 +528,19 @@ can::StatusData Daemon::statusFor(SensorState state, std::uint8_t faults) const
 }
 
 /* One report: the pose frames (when `pose` is given) and the status frame. Returns the frames. */
-int Daemon::sendReport(const can::StatusData &status, const can::PoseData *pose)
+int Daemon::sendReport(const can::StatusData &status, const can::PoseData *pose,
+		       std::int64_t deadline_ns)
 {
 	can::RawFrame frames[can::kReportFrames];
 	const int n = encoder_.encodeReport(status, pose, frames);
-	sendFrames(frames, n);
+	sendFrames(frames, n, deadline_ns);
 	return n;
 }
 
-void Daemon::sendFrames(const can::RawFrame *frames, int count)
+void Daemon::sendFrames(const can::RawFrame *frames, int count, std::int64_t deadline_ns)
 {
 	for (int i = 0; i < count; ++i)
-		if (!backends_.can->send(toHal(frames[i])))
+		if (!backends_.can->send(toHal(frames[i], deadline_ns)))
 			++stats_.can_send_drops;
 }
 
@@ -553,7 +570,7 @@ void Daemon::applyCommand(const can::CommandData &command)
 	/* Check before changing anything: a command is applied whole or not at all. */
 	const int exposure_us = command.exposure_us ? command.exposure_us : exposure_us_;
 	const double gain = command.gain > 0 ? command.gain : gain_;
-	const double period_us = 1e6 / config_.camera.frame_rate_hz;
+	const double period_us = static_cast<double>(period_ns_) / 1000.0;
 	if (exposure_us < 10 || exposure_us > period_us || gain < 1.0 || gain > 64.0) {
 		++stats_.commands_rejected;
 		command_rejected_.raise(hal::monotonicNs());
@@ -624,7 +641,8 @@ std::uint8_t Daemon::activeFaults(std::int64_t now_ns)
 	const hal::CameraStats camera = backends_.camera->stats();
 	frames_dropped_.raiseOnChange(camera.dropped, now_ns);
 	const hal::CanStats can_stats = backends_.can->stats();
-	can_overflow_.raiseOnChange(can_stats.tx_dropped, now_ns);
+	/* Frames that never left: a full queue, or reports that outlived can.max_report_age_us. */
+	can_overflow_.raiseOnChange(can_stats.tx_dropped + can_stats.tx_expired, now_ns);
 	strobe_error_.raiseOnChange(backends_.strobe_control->errorCount(), now_ns);
 
 	std::uint8_t faults = 0;

@@ -112,8 +112,10 @@ private:
 	void applyCommand(const can::CommandData &command);
 	void applyStrobeMode(StrobeMode mode);
 	can::StatusData statusFor(SensorState state, std::uint8_t faults) const;
-	int sendReport(const can::StatusData &status, const can::PoseData *pose);
-	void sendFrames(const can::RawFrame *frames, int count);
+	/* deadline_ns: CLOCK_MONOTONIC; frames still queued then are dropped unsent (0: none). */
+	int sendReport(const can::StatusData &status, const can::PoseData *pose,
+		       std::int64_t deadline_ns);
+	void sendFrames(const can::RawFrame *frames, int count, std::int64_t deadline_ns);
 	void sendStatusOnly(std::int64_t now_ns);
 	void sendHeartbeat(std::int64_t now_ns);
 	std::uint8_t activeFaults(std::int64_t now_ns);
@@ -140,6 +142,8 @@ private:
 
 	/* Frame bookkeeping. */
 	std::int64_t period_ns_; /* configured frame period: the overrun bound */
+	std::int64_t report_max_age_ns_; /* a report still queued this long after it is sent dies */
+	std::int64_t heartbeat_interval_ns_;
 	bool have_sequence_ = false;
 	std::uint64_t last_sequence_ = 0;
 	std::int64_t last_frame_ns_ = 0;

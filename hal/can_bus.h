@@ -5,7 +5,8 @@
  * send() never blocks: frames go into a bounded transmit queue (its depth set
  * at open) and on to the bus as fast as the bus takes them. When the queue is
  * full the oldest queued frame is dropped and counted (stale pose data is
- * worth less than fresh). ENOBUFS from the kernel, error frames and bus-off
+ * worth less than fresh); a frame whose deadline_ns passes while it waits is
+ * dropped and counted too (tx_expired), never sent late. ENOBUFS from the kernel, error frames and bus-off
  * are counted and reported in CanStats, and recovered from (the queue waits,
  * the bus restarts), never by blocking the frame loop.
  *
@@ -33,6 +34,9 @@ struct CanFrame {
 	std::uint8_t len = 0; /* data bytes: 0..8 classic, up to 64 FD */
 	std::array<std::uint8_t, 64> data{};
 	std::int64_t timestamp_ns = 0; /* reception (or send) time, CLOCK_MONOTONIC */
+	/* Sending only: a frame still in the transmit queue at this time (CLOCK_MONOTONIC) is
+	 * dropped unsent and counted in tx_expired; 0: it never expires. */
+	std::int64_t deadline_ns = 0;
 };
 
 /*
@@ -77,6 +81,7 @@ struct CanOptions {
 struct CanStats {
 	std::uint64_t tx_frames = 0; /* handed to the bus */
 	std::uint64_t tx_dropped = 0; /* dropped from a full transmit queue */
+	std::uint64_t tx_expired = 0; /* dropped unsent at their deadline_ns */
 	std::uint64_t tx_enobufs = 0; /* times the kernel said ENOBUFS/EAGAIN */
 	std::uint64_t tx_errors = 0; /* other send errors */
 	std::uint64_t rx_frames = 0; /* received through the filters */

@@ -84,10 +84,28 @@ bool CanBusBase::send(const CanFrame &frame)
 	}
 	CanFrame queued = canWireFrame(frame);
 	queued.timestamp_ns = monotonicNs();
+	expire(queued.timestamp_ns);
 	const bool kept = tx_.push(queued);
 	transmit();
 	publish();
 	return kept;
+}
+
+const CanFrame *CanBusBase::nextToSend(std::int64_t now_ns)
+{
+	expire(now_ns);
+	return tx_.empty() ? nullptr : &tx_.front();
+}
+
+void CanBusBase::expire(std::int64_t now_ns)
+{
+	while (!tx_.empty()) {
+		const std::int64_t deadline_ns = tx_.front().deadline_ns;
+		if (deadline_ns == 0 || now_ns < deadline_ns)
+			return;
+		tx_.pop();
+		++stats_.tx_expired;
+	}
 }
 
 bool CanBusBase::receive(CanFrame *frame)

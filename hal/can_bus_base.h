@@ -13,7 +13,11 @@
  *    with the time it was queued (CLOCK_MONOTONIC), joins the transmit queue
  *    (CanOptions::tx_queue_depth frames, at most kMaxCanTxQueueDepth); a full
  *    queue drops its oldest frame (tx_dropped + 1) and send() returns false;
- *    then transmit() writes what the bus takes now.
+ *    then transmit() writes what the bus takes now;
+ *  - a queued frame whose deadline_ns has passed is dropped unsent
+ *    (tx_expired + 1): backends take the next frame with nextToSend(), which
+ *    drops the expired ones ahead of it, and send() and expire() drop those at
+ *    the head of the queue.
  *
  * Reception: the backend hands every frame that passed its filters to
  * received(): rx_frames + 1, and it joins a ring of the depth the backend
@@ -84,8 +88,14 @@ protected:
 	bool isOpen() const { return open_; }
 	bool fdEnabled() const { return fd_; }
 
-	/* Write queued frames (tx_.front(), tx_.pop()) as far as the bus takes them now. */
+	/* Write queued frames (nextToSend(), tx_.pop()) as far as the bus takes them now. */
 	virtual void transmit() = 0;
+	/* The oldest queued frame that has not expired at now_ns (the expired ones
+	 * ahead of it are dropped, tx_expired), or nullptr when none is left. */
+	const CanFrame *nextToSend(std::int64_t now_ns);
+	/* Drop the expired frames at the head of the queue (a bus that takes
+	 * nothing still gets rid of them); the backend's poll() calls it. */
+	void expire(std::int64_t now_ns);
 	/* receive() found the ring empty: fetch what the bus has, if it can. */
 	virtual void fetch() {}
 

@@ -85,6 +85,9 @@ struct SignalLayout {
 namespace layout {
 /* DP_Quality Log10Nfa: -3276.8 .. 3276.7 in steps of 0.1. */
 constexpr SignalLayout kLog10Nfa{ kQuality, 0, 16, true, 0.1 };
+/* DP_Quality SensorTimeUs: the sensor's CLOCK_MONOTONIC when it encoded the
+ * report, in microseconds modulo 2^32 (it wraps every 71.6 minutes). */
+constexpr SignalLayout kSensorTime{ kQuality, 16, 32, false, 1.0 };
 } /* namespace layout */
 
 enum class SensorState : std::uint8_t {
@@ -241,6 +244,9 @@ struct PoseData {
 	 * negative is more certain); resolution 0.1, saturates at -3276.8 and
 	 * 3276.7; NaN is sent as 3276.7 (unknown: no evidence). */
 	double log10_nfa = 0.0;
+	/* The sensor's clock when the report was encoded (CLOCK_MONOTONIC, us modulo 2^32);
+	 * the decoder dates reports with it (Decoder::setMaxAgeUs). */
+	std::uint32_t sensor_time_us = 0;
 };
 
 struct StatusData {
@@ -473,7 +479,8 @@ public:
 			out[n++] = finish(kSigma, seq, sigma);
 			out[n++] = finish(kQuality, seq,
 					  put(layout::kLog10Nfa, p.log10_nfa,
-					      layout::kLog10Nfa.rawMax()));
+					      layout::kLog10Nfa.rawMax()) |
+						  put(layout::kSensorTime, p.sensor_time_us, 0));
 		}
 
 		const std::uint64_t st =
@@ -604,6 +611,26 @@ inline const char *frameErrorName(FrameError error)
  * PoseValid and all six pose frames of that sequence arrived intact since
  * the previous status; otherwise a PoseValid status counts in
  * incomplete_poses.
+ *
+ * Freshness: feed(frame, arrival_us) dates every report with a pose. The
+ * sensor stamps its clock into the report (SensorTimeUs, at encoding) and
+ * how long the pose had been on its way by then (LatencyMs, from the start of
+ * the exposure); the decoder cannot read the sensor's clock directly, so it
+ * takes the least-delayed report of the last kClockSamples as the reference:
+ *
+ *   delay(report) = arrival_us - SensorTimeUs          (clock offset + transit)
+ *   age(report)   = delay - min(delay over the last kClockSamples) + LatencyMs
+ *
+ * A report whose age is above maxAgeUs() (default kDefaultMaxAgeUs) is not a
+ * valid pose and counts in stale_poses: a report that sat in a queue during a
+ * bus stall arrives with its old SensorTimeUs and shows its wait. Until
+ * kMinClockSamples reports have been dated there is no reference yet, and the
+ * pose is not valid either (undated_poses); so are reports of a sensor that
+ * restarted (its heartbeat's uptime went back) until the reference is built
+ * again. A delay the whole stream shares since before the first report cannot
+ * be seen this way; the sensor never lets a report wait in its own queue
+ * beyond can.max_report_age_us, and the kernel's queue is txqueuelen frames.
+ * feed(frame) without an arrival time dates nothing (poseAgeUs() is -1).
  */
 class Decoder
 {
@@ -626,14 +653,46 @@ public:
 		std::uint64_t unknown_ids = 0;
 		std::uint64_t alive_gaps = 0; /* skipped counters: frames lost */
 		std::uint64_t stale_frames = 0;
+		std::uint64_t stale_poses = 0; /* complete, but older than maxAgeUs() */
+		std::uint64_t undated_poses = 0; /* complete, but no clock reference yet */
 	};
+
+	/* Reports dated against the least-delayed of this many. */
+	static constexpr std::size_t kClockSamples = 64;
+	/* Reports needed before a pose can be dated (and so be valid). */
+	static constexpr std::size_t kMinClockSamples = 4;
+	/* The default bound on a pose's age at arrival: 50 ms. */
+	static constexpr std::int64_t kDefaultMaxAgeUs = 50000;
 
 	explicit Decoder(std::uint32_t base_id = kDefaultBaseId)
 		: base_id_(base_id)
 	{
 	}
 
+	/* A frame from the bus, undated (no freshness check). */
 	Event feed(const RawFrame &frame)
+	{
+		timed_ = false;
+		return take(frame);
+	}
+
+	/* A frame from the bus and the receiver's clock when it arrived (us, any
+	 * monotonic clock): reports with a pose are dated (see above). */
+	Event feed(const RawFrame &frame, std::int64_t arrival_us)
+	{
+		timed_ = true;
+		arrival_us_ = arrival_us;
+		return take(frame);
+	}
+
+	/* Poses older than this at arrival are not valid (feed with arrival_us). */
+	void setMaxAgeUs(std::int64_t max_age_us) { max_age_us_ = max_age_us; }
+	std::int64_t maxAgeUs() const { return max_age_us_; }
+	/* The last dated report's age at arrival (us), -1 when it was not dated. */
+	std::int64_t poseAgeUs() const { return pose_age_us_; }
+
+private:
+	Event take(const RawFrame &frame)
 	{
 		using namespace detail;
 		++counters_.frames;
@@ -711,10 +770,14 @@ public:
 		case kQuality:
 			takePose(kQuality, seq);
 			pending_.log10_nfa = get(d, layout::kLog10Nfa);
+			pending_.sensor_time_us =
+				static_cast<std::uint32_t>(get(d, layout::kSensorTime));
 			return Event::None;
 		case kStatus:
 			return takeStatus(d, seq);
 		case kHeartbeat:
+			if (static_cast<std::uint32_t>(bits(d, 0, 24)) < heartbeat_.uptime_s)
+				resetClock(); /* the sensor restarted: its clock did too */
 			heartbeat_.uptime_s = static_cast<std::uint32_t>(bits(d, 0, 24));
 			heartbeat_.state = static_cast<SensorState>(bits(d, 24, 3));
 			heartbeat_.mode = static_cast<TrackMode>(bits(d, 27, 1));
@@ -734,6 +797,7 @@ public:
 		}
 	}
 
+public:
 	/* The last report's status, as sent (pose_valid is the sender's flag). */
 	const StatusData &status() const { return status_; }
 	/* After a Report: status().pose_valid and all six pose frames of its
@@ -774,12 +838,15 @@ private:
 		status_.latency_ms = static_cast<double>(bits(d, 32, 16)) * kLatencyRes;
 		sequence_ = seq;
 
-		pose_valid_ = status_.pose_valid && pending_mask_ == kPoseFrameMask &&
-			      pending_seq_ == seq;
+		const bool complete = pending_mask_ == kPoseFrameMask && pending_seq_ == seq;
+		pose_valid_ = status_.pose_valid && complete;
+		pose_age_us_ = -1;
+		if (pose_valid_ && timed_)
+			pose_valid_ = datePose();
 		if (pose_valid_) {
 			pose_ = pending_;
 			++counters_.valid_poses;
-		} else if (status_.pose_valid) {
+		} else if (status_.pose_valid && !complete) {
 			++counters_.incomplete_poses;
 		}
 		pending_mask_ = 0;
@@ -787,9 +854,56 @@ private:
 		return Event::Report;
 	}
 
+	/* The complete report in pending_ arrived at arrival_us_: its age, and
+	 * whether it is young enough (counting the ones that are not). */
+	bool datePose()
+	{
+		/* SensorTimeUs wraps every 2^32 us: unwrap against the previous one. */
+		const std::uint32_t raw = pending_.sensor_time_us;
+		if (clock_count_ == 0)
+			sensor_us_ = raw;
+		else
+			sensor_us_ += static_cast<std::int32_t>(
+				raw - static_cast<std::uint32_t>(sensor_us_));
+		const std::int64_t delay_us = arrival_us_ - sensor_us_;
+		clock_[clock_next_] = delay_us;
+		clock_next_ = (clock_next_ + 1) % kClockSamples;
+		if (clock_count_ < kClockSamples)
+			++clock_count_;
+		std::int64_t min_us = delay_us;
+		for (std::size_t i = 0; i < clock_count_; ++i)
+			min_us = clock_[i] < min_us ? clock_[i] : min_us;
+
+		pose_age_us_ = delay_us - min_us +
+			       static_cast<std::int64_t>(std::llround(status_.latency_ms * 1000.0));
+		if (clock_count_ < kMinClockSamples) {
+			++counters_.undated_poses;
+			return false;
+		}
+		if (pose_age_us_ > max_age_us_) {
+			++counters_.stale_poses;
+			return false;
+		}
+		return true;
+	}
+
+	void resetClock()
+	{
+		clock_count_ = 0;
+		clock_next_ = 0;
+	}
+
 	std::uint32_t base_id_;
 	std::array<std::uint8_t, detail::kSlots> alive_{};
 	std::array<bool, detail::kSlots> alive_seen_{};
+	bool timed_ = false;
+	std::int64_t arrival_us_ = 0;
+	std::int64_t max_age_us_ = kDefaultMaxAgeUs;
+	std::int64_t pose_age_us_ = -1;
+	std::array<std::int64_t, kClockSamples> clock_{};
+	std::size_t clock_count_ = 0;
+	std::size_t clock_next_ = 0;
+	std::int64_t sensor_us_ = 0;
 	PoseData pending_;
 	std::uint8_t pending_mask_ = 0; /* bit per pose offset held */
 	std::uint8_t pending_seq_ = 0;

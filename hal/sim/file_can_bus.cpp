@@ -11,6 +11,7 @@
 #include <system_error>
 #include <utility>
 
+#include "hal/clock.h"
 #include "hal/sim/sim_can.h"
 
 namespace dockpose::hal {
@@ -120,8 +121,14 @@ bool FileCanBus::writeFrame(const CanFrame &frame)
 
 void FileCanBus::transmit()
 {
-	while (!tx_.empty() && budget_ != 0) {
-		if (writeFrame(tx_.front()))
+	const std::int64_t now_ns = monotonicNs();
+	if (budget_ == 0)
+		expire(now_ns);
+	while (budget_ != 0) {
+		const CanFrame *next = nextToSend(now_ns);
+		if (!next)
+			break;
+		if (writeFrame(*next))
 			++stats_.tx_frames;
 		else
 			writeFailed(errno);

@@ -120,10 +120,13 @@ void LoopbackCanBus::transmit()
 	if (tx_.empty())
 		return;
 	std::lock_guard<std::mutex> lock(hub_->mutex_);
-	if (hub_->blocked_ || hub_->bus_off_)
+	if (hub_->blocked_ || hub_->bus_off_) {
+		expire(monotonicNs());
 		return;
-	CanFrame frame;
-	while (tx_.pop(&frame)) {
+	}
+	while (const CanFrame *next = nextToSend(monotonicNs())) {
+		CanFrame frame = *next;
+		tx_.pop();
 		frame.timestamp_ns = monotonicNs();
 		hub_->traffic_.push(frame);
 		for (LoopbackCanBus *endpoint : hub_->endpoints_)

@@ -321,8 +321,11 @@ void SocketCanBus::poll()
 		return;
 	if (stats_.state == CanState::Down) {
 		const std::int64_t now_ns = io_->nowNs();
-		if (now_ns < next_reopen_ns_)
+		expire(monotonicNs());
+		if (now_ns < next_reopen_ns_) {
+			publish();
 			return;
+		}
 		if (!reopen(now_ns)) {
 			publish();
 			return;
@@ -340,10 +343,14 @@ int SocketCanBus::fd() const
 
 void SocketCanBus::transmit()
 {
-	if (stats_.state == CanState::Down)
+	/* Deadlines are CLOCK_MONOTONIC, as send() stamps them (io_'s clock paces reopening). */
+	const std::int64_t now_ns = monotonicNs();
+	if (stats_.state == CanState::Down) {
+		expire(now_ns);
 		return;
-	while (!tx_.empty()) {
-		const CanFrame &frame = tx_.front();
+	}
+	while (const CanFrame *next = nextToSend(now_ns)) {
+		const CanFrame &frame = *next;
 		int err;
 		if (frame.fd) {
 			canfd_frame k;

@@ -95,6 +95,7 @@ public:
 			p.sigma_rpy_deg[i] = uniform(0, 2.55);
 		}
 		p.log10_nfa = uniform(-300, 0);
+		p.sensor_time_us = std::uniform_int_distribution<std::uint32_t>()(rng_);
 		return p;
 	}
 
@@ -300,6 +301,7 @@ TEST(CanProtocol, RandomRoundTrip)
 			ASSERT_EQ(dec.poseValid(), with_pose);
 			if (with_pose) {
 				expectPoseNear(dec.pose(), pose);
+				EXPECT_EQ(dec.pose().sensor_time_us, pose.sensor_time_us);
 				++valid;
 			}
 			if (::testing::Test::HasFailure())
@@ -728,6 +730,155 @@ TEST(CanProtocol, BusLoad)
 	EXPECT_GT(worstCaseBusLoad(60, 10, 125000), 0.30);
 }
 
+/* ---- Freshness: the decoder dates reports (feed with an arrival time) ---- */
+
+namespace {
+
+/*
+ * A sensor at 60 reports/s: report i is encoded at sensor time send_us(i)
+ * (its exposure began latency_ms earlier); the receiver's clock is the
+ * sensor's plus an unknown offset, and a frame arrives transit_us after it
+ * was sent unless a test delays it.
+ */
+class FreshnessTest : public ::testing::Test
+{
+protected:
+	static constexpr std::int64_t kPeriodUs = 16667;
+	static constexpr std::int64_t kOffsetUs = 987654321; /* receiver clock - sensor clock */
+	static constexpr std::int64_t kTransitUs = 300;
+	static constexpr double kLatencyMs = 7.5;
+
+	std::int64_t sendUs(int i) const { return start_us_ + i * kPeriodUs; }
+
+	/* Encode report i (a pose at tz = 1000 - i mm) and feed it as arriving `delay_us` late. */
+	Event deliver(int i, std::int64_t delay_us = 0)
+	{
+		StatusData st;
+		st.state = SensorState::Tracking;
+		st.pose_valid = true;
+		st.latency_ms = kLatencyMs;
+		PoseData pose;
+		pose.t_mm[2] = 1000 - i;
+		pose.frame_counter = static_cast<std::uint32_t>(i);
+		pose.sensor_time_us = static_cast<std::uint32_t>(sendUs(i));
+		RawFrame frames[kReportFrames];
+		const int n = enc_.encodeReport(st, &pose, frames);
+		Event ev = Event::None;
+		for (int k = 0; k < n; ++k)
+			ev = dec_.feed(frames[k], sendUs(i) + kOffsetUs + kTransitUs + delay_us);
+		return ev;
+	}
+
+	std::int64_t start_us_ = 5000000;
+	Encoder enc_;
+	Decoder dec_;
+};
+
+} /* namespace */
+
+TEST_F(FreshnessTest, OnTimeReportsAreValidOnceTheClockReferenceIsBuilt)
+{
+	for (int i = 0; i < 100; ++i) {
+		ASSERT_EQ(deliver(i), Event::Report);
+		const bool dated = static_cast<std::size_t>(i + 1) >= Decoder::kMinClockSamples;
+		EXPECT_EQ(dec_.poseValid(), dated) << i;
+		/* Age: the latency; the transit is the reference's own. */
+		EXPECT_EQ(dec_.poseAgeUs(), static_cast<std::int64_t>(kLatencyMs * 1000)) << i;
+	}
+	EXPECT_EQ(dec_.counters().undated_poses, Decoder::kMinClockSamples - 1);
+	EXPECT_EQ(dec_.counters().stale_poses, 0u);
+	EXPECT_EQ(dec_.counters().valid_poses, 100 - (Decoder::kMinClockSamples - 1));
+}
+
+/* The probe of the issue: the bus stalls for 1 s with 60 reports queued, then
+ * they all arrive at once. Only those young enough at arrival are poses. */
+TEST_F(FreshnessTest, ReportsQueuedThroughAOneSecondStallAreStale)
+{
+	for (int i = 0; i < 20; ++i)
+		deliver(i);
+	ASSERT_TRUE(dec_.poseValid());
+	const std::int64_t released_us = sendUs(80); /* the bus comes back at report 80 */
+	int accepted = 0;
+	for (int i = 20; i < 80; ++i) {
+		ASSERT_EQ(deliver(i, released_us - sendUs(i)), Event::Report);
+		const std::int64_t real_age_us = released_us - sendUs(i) + kTransitUs +
+						 static_cast<std::int64_t>(kLatencyMs * 1000);
+		EXPECT_EQ(dec_.poseAgeUs(), real_age_us - kTransitUs) << i;
+		EXPECT_EQ(dec_.poseValid(), dec_.poseAgeUs() <= Decoder::kDefaultMaxAgeUs) << i;
+		if (dec_.poseValid()) {
+			++accepted;
+			EXPECT_LE(real_age_us, Decoder::kDefaultMaxAgeUs + kTransitUs);
+			EXPECT_LT(dec_.pose().t_mm[2], 1000 - 75 + 0.05) << "only the newest";
+		}
+	}
+	/* 50 ms bound, 7.5 ms latency, 16.7 ms period: the newest two (ages 24.2 and 40.8 ms). */
+	EXPECT_EQ(accepted, 2);
+	EXPECT_EQ(dec_.counters().stale_poses, 58u);
+	/* Reports on time again: valid at once (the reference survived the stall). */
+	ASSERT_EQ(deliver(80), Event::Report);
+	EXPECT_TRUE(dec_.poseValid());
+}
+
+TEST_F(FreshnessTest, OneLateReportAmongOnTimeOnesIsStale)
+{
+	for (int i = 0; i < 10; ++i)
+		deliver(i);
+	dec_.setMaxAgeUs(20000);
+	ASSERT_EQ(deliver(10, 12501), Event::Report); /* 7.5 + 12.501 ms: just over */
+	EXPECT_FALSE(dec_.poseValid());
+	EXPECT_EQ(dec_.counters().stale_poses, 1u);
+	ASSERT_EQ(deliver(11, 12500), Event::Report); /* exactly the bound */
+	EXPECT_TRUE(dec_.poseValid());
+	EXPECT_EQ(dec_.poseAgeUs(), 20000);
+}
+
+TEST_F(FreshnessTest, SensorTimeWrapsWithoutAStep)
+{
+	start_us_ = (std::int64_t{ 1 } << 32) - 10 * kPeriodUs; /* wraps at report 10 */
+	for (int i = 0; i < 30; ++i) {
+		ASSERT_EQ(deliver(i), Event::Report);
+		if (static_cast<std::size_t>(i + 1) >= Decoder::kMinClockSamples) {
+			EXPECT_TRUE(dec_.poseValid()) << i;
+		}
+	}
+	EXPECT_EQ(dec_.counters().stale_poses, 0u);
+}
+
+/* A sensor that restarts has a new clock: its heartbeat's uptime goes back and
+ * the decoder builds its reference again instead of judging by the old one. */
+TEST_F(FreshnessTest, ASensorRestartRebuildsTheReference)
+{
+	HeartbeatData hb;
+	hb.uptime_s = 500;
+	dec_.feed(enc_.encodeHeartbeat(hb), 0);
+	for (int i = 0; i < 10; ++i)
+		deliver(i);
+	ASSERT_TRUE(dec_.poseValid());
+	/* Restarted: uptime 1 s, its clock far behind (every report would look an hour old). */
+	hb.uptime_s = 1;
+	dec_.feed(enc_.encodeHeartbeat(hb), 0);
+	start_us_ -= 3600LL * 1000000;
+	const std::uint64_t undated_before = dec_.counters().undated_poses;
+	for (int i = 10; i < 20; ++i)
+		deliver(i);
+	EXPECT_TRUE(dec_.poseValid());
+	EXPECT_EQ(dec_.counters().undated_poses - undated_before, Decoder::kMinClockSamples - 1);
+	EXPECT_EQ(dec_.counters().stale_poses, 0u);
+}
+
+TEST_F(FreshnessTest, UndatedFeedChecksNoAge)
+{
+	StatusData st;
+	st.pose_valid = true;
+	PoseData pose;
+	RawFrame frames[kReportFrames];
+	const int n = enc_.encodeReport(st, &pose, frames);
+	for (int k = 0; k < n; ++k)
+		dec_.feed(frames[k]);
+	EXPECT_TRUE(dec_.poseValid());
+	EXPECT_EQ(dec_.poseAgeUs(), -1);
+}
+
 /* ---- Independent check of the DBC with canmatrix, and of scripts/candecode ---- */
 
 namespace {
@@ -974,6 +1125,8 @@ protected:
 			case kQuality:
 				ASSERT_EQ(msg, "DP_Quality");
 				EXPECT_NEAR(val("Log10Nfa"), sentNfa(p.log10_nfa), kTolNfa);
+				EXPECT_EQ(raw["SensorTimeUs"].get<std::uint32_t>(),
+					  p.sensor_time_us);
 				EXPECT_EQ(sequenceOf(f), report & 0x0f);
 				break;
 			case kStatus: {
@@ -1111,7 +1264,8 @@ TEST(CanProtocol, SignalLayoutsAreTheDbcs)
 		const char *name;
 		const SignalLayout &layout;
 	};
-	const Named layouts[] = { { "Log10Nfa", layout::kLog10Nfa } };
+	const Named layouts[] = { { "Log10Nfa", layout::kLog10Nfa },
+				  { "SensorTimeUs", layout::kSensorTime } };
 	for (const Named &n : layouts) {
 		SCOPED_TRACE(n.name);
 		/* The message that holds the signal: the last BO_ before its SG_ line. */

@@ -65,8 +65,9 @@ public:
 	{
 		hub_ = std::make_shared<hal::LoopbackHub>();
 		board::Backends b;
-		const hal::Status wired = board::wireSimulated(
-			config, std::make_unique<hal::LoopbackCanBus>(hub_, "sensor"), &b);
+		auto sensor_bus = std::make_unique<hal::LoopbackCanBus>(hub_, "sensor");
+		sensor_bus_ = sensor_bus.get();
+		const hal::Status wired = board::wireSimulated(config, std::move(sensor_bus), &b);
 		EXPECT_TRUE(wired.isOk()) << wired.message();
 		/* The sim wiring's types, as board.json's camera.backend is "synthetic". */
 		strobe_ = static_cast<hal::RecordingStrobe *>(b.strobe.get());
@@ -174,6 +175,7 @@ public:
 
 	BoardConfig config_;
 	std::shared_ptr<hal::LoopbackHub> hub_;
+	hal::LoopbackCanBus *sensor_bus_ = nullptr; /* the daemon's end of the bus */
 	hal::RecordingStrobe *strobe_ = nullptr;
 	hal::SyntheticCamera *camera_ = nullptr;
 	std::FILE *log_ = nullptr;
@@ -498,7 +500,74 @@ TEST(Daemon, FullCanQueueDropsAndCountsWhileTheLoopKeepsRate)
 		3s))
 		<< "the overflow was not reported";
 	rig.stop();
-	EXPECT_GT(rig.daemon_->stats().can_send_drops, 0u);
+	/* Dropped from the full queue, or expired in it (the reports outlived a frame period). */
+	const hal::CanStats can_stats = rig.sensor_bus_->stats();
+	EXPECT_GT(rig.daemon_->stats().can_send_drops + can_stats.tx_expired, 0u);
+}
+
+/* Issue 10's probe: the bus stalls for 1 s with a queue deep enough for every report of that
+ * second. Before, the queue kept them and sent them, oldest first and marked valid, once the bus
+ * was back. Now no report reaches the bus more than a frame period after it was queued: what
+ * waited longer is dropped unsent, and every report the controller decodes (dated with the time
+ * it crossed the bus) is fresh. */
+TEST(Daemon, AfterAOneSecondBusStallNoStaleReportReachesTheBus)
+{
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	config.can.tx_queue_depth = 1024;
+	Rig rig(config);
+	rig.start();
+	ASSERT_TRUE(rig.waitForValidPose(10s));
+
+	rig.hub_->setBlocked(true);
+	std::this_thread::sleep_for(1s);
+	const std::int64_t released_ns = hal::monotonicNs();
+	rig.hub_->setBlocked(false);
+	ASSERT_TRUE(rig.waitFor(
+		[&] {
+			return !rig.reports_.empty() && rig.reports_.back().pose_valid &&
+			       rig.reports_.back().received_ns > released_ns + 200'000'000;
+		},
+		5s));
+	rig.stop();
+
+	const hal::CanStats can_stats = rig.sensor_bus_->stats();
+	EXPECT_GT(can_stats.tx_expired, 7u * 40) << "a second of reports should have expired";
+	EXPECT_EQ(can_stats.tx_dropped, 0u) << "the queue was deep enough for all of them";
+
+	/* Every frame as it crossed the bus: the wait of each report with a pose (the wire time
+	 * against the sensor's stamp in DP_Quality, both CLOCK_MONOTONIC here), and the
+	 * controller's decoder dating them. */
+	const std::int64_t max_age_us = config.camera.frameDurationUs();
+	can::Decoder dated(can::kDefaultBaseId);
+	int poses = 0;
+	int after_stall = 0;
+	std::int64_t longest_us = 0;
+	for (const hal::CanFrame &f : rig.hub_->traffic()) {
+		can::RawFrame raw;
+		raw.id = f.id;
+		raw.len = f.len;
+		std::copy_n(f.data.begin(), 8, raw.data.begin());
+		dated.feed(raw, f.timestamp_ns / 1000);
+		if (raw.id != can::kDefaultBaseId + can::kQuality)
+			continue;
+		++poses;
+		after_stall += f.timestamp_ns > released_ns;
+		const auto sensor_us = static_cast<std::uint32_t>(
+			can::detail::get(raw.data, can::layout::kSensorTime));
+		const std::int64_t waited_us = static_cast<std::int32_t>(
+			static_cast<std::uint32_t>(f.timestamp_ns / 1000) - sensor_us);
+		longest_us = std::max(longest_us, waited_us);
+		EXPECT_LE(waited_us, max_age_us) << "a report waited too long";
+	}
+	std::printf("[          ] %d poses crossed the bus (%d after the stall), the longest wait "
+		    "%.2f ms (bound %.2f ms); %llu frames expired\n",
+		    poses, after_stall, static_cast<double>(longest_us) * 1e-3,
+		    static_cast<double>(max_age_us) * 1e-3,
+		    static_cast<unsigned long long>(can_stats.tx_expired));
+	EXPECT_GT(after_stall, 10);
+	EXPECT_GT(dated.counters().valid_poses, 10u);
+	EXPECT_EQ(dated.counters().stale_poses, 0u);
 }
 
 } /* namespace */

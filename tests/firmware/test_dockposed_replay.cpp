@@ -15,8 +15,8 @@
  * the difference image.
  *
  * Only what depends on the clock is left out: heartbeats (sent at
- * heartbeat_hz of wall time) and, in DP_Status, the latency signal and the
- * CRC that covers it. Everything else — every pose frame, the alive
+ * heartbeat_hz of wall time), in DP_Status the latency signal, in
+ * DP_Quality the sensor's time stamp, and the CRCs that cover them. Everything else — every pose frame, the alive
  * counters and sequence numbers, the state, flags, LED count, rms and fault
  * bits — must be identical: a refactoring that changes one bit of what the
  * arm controller receives fails here, naming the first frame that differs.
@@ -129,7 +129,8 @@ std::string writeReplayBoard(const std::string &dir, const std::string &frames, 
 
 /*
  * "ID#DATA" of every frame of a candump -L log but the heartbeats; in the
- * status frames the latency signal (bytes 4-5) and the CRC (byte 7) zeroed.
+ * status frames the latency signal (bytes 4-5), in the quality frames the sensor time
+ * (bytes 2-5), and in both the CRC (byte 7) zeroed.
  */
 std::vector<std::string> reportFrames(const std::string &log, std::uint32_t base_id)
 {
@@ -149,6 +150,10 @@ std::vector<std::string> reportFrames(const std::string &log, std::uint32_t base
 			continue;
 		if (id == base_id + dockpose::can::kStatus) {
 			data.replace(8, 4, "0000");
+			data.replace(14, 2, "00");
+		}
+		if (id == base_id + dockpose::can::kQuality) {
+			data.replace(4, 8, "00000000");
 			data.replace(14, 2, "00");
 		}
 		out.push_back(m[1].str() + "#" + data);
@@ -187,7 +192,7 @@ void checkReplay(bool alternate, const std::string &golden_path, int min_poses)
 		std::ofstream golden(golden_path, std::ios::trunc);
 		golden << "# dockposed's report frames for tests/firmware/test_dockposed_replay.cpp (x86_64"
 		       << (alternate ? ", strobe alternate" : "") << ");\n"
-		       << "# DP_Status latency and CRC zeroed, heartbeats left out. Regenerate only for an\n"
+		       << "# DP_Status latency, DP_Quality sensor time and their CRCs zeroed, heartbeats left out. Regenerate only for an\n"
 		       << "# intended change of the CAN output: DOCKPOSE_UPDATE_GOLDEN=1.\n";
 		for (const std::string &f : got)
 			golden << f << "\n";

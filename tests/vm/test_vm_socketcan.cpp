@@ -16,7 +16,10 @@
  *    tbf at 1 kbit/s (one classic frame per 128 ms) whose pfifo holds txqueuelen
  *    frames (set to 4). The kernel then refuses frames with ENOBUFS; send() still
  *    never blocks, the queue keeps the newest frames and counts the oldest it
- *    drops, and poll() gets the rest out as the qdisc drains. Needs
+ *    drops, and poll() gets the rest out as the qdisc drains, except those whose
+ *    deadline passed while they waited: they are dropped unsent (tx_expired),
+ *    never sent late, so what reaches the bus after the stall is only what the
+ *    kernel already held (txqueuelen frames) and frames still in time. Needs
  *    CONFIG_NET_SCHED and CONFIG_NET_SCH_TBF in the test kernel (skipped, saying
  *    so, without); tc qdisc show is the witness of the setup
  *  - a missing interface (the message lists the CAN interfaces present), one
@@ -644,7 +647,7 @@ private:
 	bool active_ = false;
 };
 
-TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
+TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestExpiresLateAndFlowsAgain)
 {
 	if (const std::string why = SlowQdisc::unavailable(); !why.empty())
 		GTEST_SKIP() << why;
@@ -668,6 +671,9 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 	SocketCanBus bus("vcan0");
 	constexpr int kDepth = 8;
 	constexpr int kFrames = 40;
+	/* Each frame may wait this long in our queue: three qdisc periods, so of the kDepth
+	 * frames queued behind the full qdisc a few go out and the rest expire. */
+	constexpr std::int64_t kMaxWaitMs = 3 * SlowQdisc::kFramePeriodMs;
 	CanOptions options;
 	options.tx_queue_depth = kDepth;
 	ASSERT_TRUE(bus.open({}, options).isOk()) << bus.lastError();
@@ -679,7 +685,9 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 	const std::int64_t start_ns = monotonicNs();
 	for (int i = 0; i < kFrames; ++i) {
 		const std::int64_t t0 = monotonicNs();
-		if (!bus.send(numberedFrame(0x321, i)))
+		CanFrame frame = numberedFrame(0x321, i);
+		frame.deadline_ns = t0 + kMaxWaitMs * 1000000;
+		if (!bus.send(frame))
 			++refused_sends;
 		const std::int64_t took_ns = monotonicNs() - t0;
 		longest_send_ns = std::max(longest_send_ns, took_ns);
@@ -719,7 +727,8 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 	EXPECT_EQ(after_sending.tx_queued, static_cast<std::uint32_t>(kDepth));
 	EXPECT_GT(after_sending.tx_dropped, 0u);
 	EXPECT_EQ(static_cast<std::uint64_t>(refused_sends), after_sending.tx_dropped);
-	EXPECT_EQ(after_sending.tx_frames + after_sending.tx_dropped + after_sending.tx_queued,
+	EXPECT_EQ(after_sending.tx_frames + after_sending.tx_dropped + after_sending.tx_queued +
+			  after_sending.tx_expired,
 		  static_cast<std::uint64_t>(kFrames));
 	EXPECT_EQ(after_sending.tx_errors, 0u);
 	EXPECT_EQ(after_sending.state, CanState::ErrorActive);
@@ -742,14 +751,23 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestAndFlowsAgain)
 			     << " of " << after_drain.tx_frames << " arrived";
 	EXPECT_GT(after_drain.tx_enobufs, after_sending.tx_enobufs)
 		<< "poll() met the full qdisc too";
-	EXPECT_EQ(after_drain.tx_frames, after_sending.tx_frames + kDepth);
 	EXPECT_EQ(after_drain.tx_dropped, after_sending.tx_dropped);
+	/* Of the kDepth queued frames, those the qdisc took within kMaxWaitMs left; the others
+	 * expired unsent. The qdisc frees a slot every period: at most three in time. */
+	const std::uint64_t late_sent = after_drain.tx_frames - after_sending.tx_frames;
+	EXPECT_EQ(late_sent + after_drain.tx_expired - after_sending.tx_expired,
+		  static_cast<std::uint64_t>(after_sending.tx_queued));
+	EXPECT_GE(after_drain.tx_expired, static_cast<std::uint64_t>(kDepth - 3));
+	std::printf("[          ] after the stall: %llu queued frames sent in time, %llu expired\n",
+		    static_cast<unsigned long long>(late_sent),
+		    static_cast<unsigned long long>(after_drain.tx_expired));
 
-	/* What arrived: the frames the kernel took at once, then the newest kDepth, in order. */
+	/* What arrived: the frames the kernel took at once, then the oldest of the newest kDepth
+	 * that were still in time, in order; no expired frame. */
 	std::vector<int> expected;
 	for (std::uint64_t i = 0; i < after_sending.tx_frames; ++i)
 		expected.push_back(static_cast<int>(i));
-	for (int i = kFrames - kDepth; i < kFrames; ++i)
+	for (int i = kFrames - kDepth; i < kFrames - kDepth + static_cast<int>(late_sent); ++i)
 		expected.push_back(i);
 	std::vector<int> seqs;
 	for (const CanFrame &f : got)
