@@ -139,6 +139,8 @@ hal::Status Daemon::start()
 		    backends_.can->open(std::span<const hal::CanFilter>(&commands, 1), config_.can);
 	    !s)
 		return hal::Status::error("can: " + s.message());
+	/* An interface that is missing or down is waited for (the bus says so once, here). */
+	logCanLink();
 
 	if (auto s = backends_.camera->configure(config_.camera); !s)
 		return hal::Status::error("camera: " + s.message());
@@ -223,6 +225,7 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 		if (now_ns >= next_heartbeat_ns_)
 			sendHeartbeat(now_ns);
 		backends_.can->poll();
+		logCanLink();
 		notifier_.watchdog(now_ns);
 		updateSystemdStatus(now_ns);
 	}
@@ -654,7 +657,8 @@ std::uint8_t Daemon::activeFaults(std::int64_t now_ns)
 		faults |= can::fault::kStrobeError;
 	if (can_overflow_.active(now_ns))
 		faults |= can::fault::kCanTxOverflow;
-	if (can_stats.state == hal::CanState::BusOff)
+	/* Down: the interface is missing or down, and frames wait in the queue for it. */
+	if (can_stats.state == hal::CanState::BusOff || can_stats.state == hal::CanState::Down)
 		faults |= can::fault::kCanBusOff;
 	if (frames_dropped_.active(now_ns))
 		faults |= can::fault::kFramesDropped;
@@ -674,16 +678,31 @@ void Daemon::logState(SensorState before, SensorState after, std::uint64_t seque
 		     can::sensorStateName(after), static_cast<unsigned long long>(sequence));
 }
 
+void Daemon::logCanLink()
+{
+	const hal::CanStats can_stats = backends_.can->stats();
+	const bool down = can_stats.state == hal::CanState::Down;
+	if (down == can_down_)
+		return;
+	can_down_ = down;
+	if (down)
+		std::fprintf(log_, "dockposed: %s\n", backends_.can->lastError().c_str());
+	else
+		std::fprintf(log_, "dockposed: can: %s is up (restarts %llu)\n",
+			     backends_.can->name().c_str(),
+			     static_cast<unsigned long long>(can_stats.restarts));
+}
+
 void Daemon::updateSystemdStatus(std::int64_t now_ns)
 {
 	if (!notifier_.active() || now_ns - last_systemd_status_ns_ < kNsPerS)
 		return;
 	last_systemd_status_ns_ = now_ns;
 	char text[160];
-	std::snprintf(text, sizeof(text), "%s, %.1f frames/s, %llu poses, latency p50 %.2f ms",
+	std::snprintf(text, sizeof(text), "%s, %.1f frames/s, %llu poses, latency p50 %.2f ms%s",
 		      can::sensorStateName(state_machine_.state()), frame_rate_hz_,
 		      static_cast<unsigned long long>(stats_.poses_valid),
-		      stats_.latency.quantileMs(0.5));
+		      stats_.latency.quantileMs(0.5), can_down_ ? ", CAN down" : "");
 	notifier_.status(text);
 }
 

@@ -121,6 +121,8 @@ private:
 	std::uint8_t activeFaults(std::int64_t now_ns);
 	void logState(SensorState before, SensorState after, std::uint64_t sequence);
 	void updateSystemdStatus(std::int64_t now_ns);
+	/* The CAN link going down (interface missing or down) or up: one log line each way. */
+	void logCanLink();
 
 	BoardConfig config_;
 	board::Backends backends_;
@@ -158,6 +160,7 @@ private:
 	std::uint64_t rate_frames_ = 0;
 	std::int64_t rate_start_ns_ = 0;
 	double frame_rate_hz_ = 0.0;
+	bool can_down_ = false; /* the CAN bus was Down when last looked at (logCanLink) */
 
 	/* Timed faults: events keep their bit for kFaultHoldNs after they happen. */
 	static constexpr std::int64_t kFaultHoldNs = 1000000000;

@@ -86,8 +86,8 @@ class KernelSocketCanIo : public SocketCanIo
 public:
 	~KernelSocketCanIo() override { close(); }
 
-	bool open(const SocketCanOpenRequest &request, bool describe,
-		  std::span<char> error) override;
+	SocketCanOpenResult open(const SocketCanOpenRequest &request, bool describe,
+				 std::span<char> error) override;
 	void close() override;
 	int write(const void *frame, std::size_t size) override;
 	int read(SocketCanRead *out) override;
@@ -95,30 +95,31 @@ public:
 	int fd() const override { return fd_; }
 
 private:
-	bool fail(int s, std::span<char> error, const char *what, const char *interface, int err);
+	SocketCanOpenResult fail(int s, std::span<char> error, const char *what,
+				 const char *interface, int err);
 
 	int fd_ = -1;
 };
 
-bool KernelSocketCanIo::fail(int s, std::span<char> error, const char *what, const char *interface,
-			     int err)
+SocketCanOpenResult KernelSocketCanIo::fail(int s, std::span<char> error, const char *what,
+					    const char *interface, int err)
 {
 	char buf[128];
 	formatInto(error, "can: %s on \"%s\" failed: %s", what, interface,
 		   errorText(err, buf, sizeof(buf)));
 	::close(s);
-	return false;
+	return SocketCanOpenResult::Failed;
 }
 
-bool KernelSocketCanIo::open(const SocketCanOpenRequest &request, bool describe,
-			     std::span<char> error)
+SocketCanOpenResult KernelSocketCanIo::open(const SocketCanOpenRequest &request, bool describe,
+					    std::span<char> error)
 {
 	close();
 
 	const int s = ::socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW);
 	if (s < 0) {
 		socketcan::socketErrorMessage(errno, error);
-		return false;
+		return SocketCanOpenResult::Failed;
 	}
 
 	socketcan::InterfaceInfo info;
@@ -130,14 +131,16 @@ bool KernelSocketCanIo::open(const SocketCanOpenRequest &request, bool describe,
 		else
 			formatInto(error, "can: no CAN interface \"%s\"", request.interface);
 		::close(s);
-		return false;
+		return SocketCanOpenResult::NotReady;
 	}
 	if (err)
 		return fail(s, error, "looking up the interface", request.interface, err);
 	if (!socketcan::checkInterface(request.interface, info, request.fd, request.bitrate,
 				       error)) {
 		::close(s);
-		return false;
+		/* A CAN interface that is down may be brought up; the other problems stay. */
+		return info.is_can && !info.up ? SocketCanOpenResult::NotReady
+					       : SocketCanOpenResult::Failed;
 	}
 
 	/* No filters: an empty list, which receives nothing. */
@@ -170,7 +173,7 @@ bool KernelSocketCanIo::open(const SocketCanOpenRequest &request, bool describe,
 		return fail(s, error, "bind", request.interface, errno);
 
 	fd_ = s;
-	return true;
+	return SocketCanOpenResult::Opened;
 }
 
 void KernelSocketCanIo::close()
@@ -277,6 +280,7 @@ Status SocketCanBus::open(std::span<const CanFilter> filters, const CanOptions &
 {
 	close();
 	kernel_drops_ = 0;
+	never_up_ = false;
 	if (Status s = openQueues(options, kRxRingFrames); !s.isOk())
 		return s;
 
@@ -301,12 +305,28 @@ Status SocketCanBus::open(std::span<const CanFilter> filters, const CanOptions &
 	for (const CanFilter &f : filters)
 		kernel_filters_.push_back(socketcan::toKernelFilter(f));
 
-	if (!io_->open(request(), true, errorBuffer())) {
+	switch (io_->open(request(), true, errorBuffer())) {
+	case SocketCanOpenResult::Opened:
+		markOpen();
+		return Status::ok();
+	case SocketCanOpenResult::NotReady: {
+		/* Open, but Down until the interface is there and up: poll() reopens it. */
+		const std::string why = lastError();
+		markOpen();
+		stats_.state = CanState::Down;
+		never_up_ = true;
+		next_reopen_ns_ =
+			io_->nowNs() + static_cast<std::int64_t>(kReopenInterval_ms) * 1000000;
+		setError("%s; waiting for it (retried every %d ms)", why.c_str(),
+			 kReopenInterval_ms);
 		publish();
-		return Status::error(lastError());
+		return Status::ok();
 	}
-	markOpen();
-	return Status::ok();
+	case SocketCanOpenResult::Failed:
+		break;
+	}
+	publish();
+	return Status::error(lastError());
 }
 
 void SocketCanBus::close()
@@ -441,12 +461,15 @@ void SocketCanBus::linkLost(int err, const char *operation)
 
 bool SocketCanBus::reopen(std::int64_t now_ns)
 {
-	if (!io_->open(request(), false, errorBuffer())) {
+	if (io_->open(request(), false, errorBuffer()) != SocketCanOpenResult::Opened) {
 		next_reopen_ns_ = now_ns + static_cast<std::int64_t>(kReopenInterval_ms) * 1000000;
 		return false;
 	}
 	kernel_drops_ = 0;
-	++stats_.restarts;
+	/* Joining late, the first time, is no restart. */
+	if (!never_up_)
+		++stats_.restarts;
+	never_up_ = false;
 	stats_.state = CanState::ErrorActive;
 	return true;
 }

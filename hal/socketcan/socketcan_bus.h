@@ -18,11 +18,19 @@
  *    moved onto CLOCK_MONOTONIC with the offset between the two clocks taken
  *    when the frame is read; the read time when the kernel gave none.
  *  - the kernel's count of frames this socket lost (SO_RXQ_OVFL).
- * open() fails with a message naming the problem:
+ * An interface that does not exist yet, or exists but is down, is not an
+ * error: at boot the sensor's CAN interface may appear (a USB adapter, an SPI
+ * controller's driver) or be configured (systemd-networkd sets the bitrate and
+ * brings it up) after dockposed started, and the camera and LEDs should not
+ * wait for it. open() then succeeds with the bus in state Down, fd() -1,
+ * lastError() saying what is missing and that it is waited for:
+ *    can: no CAN interface "can0" (CAN interfaces present: vcan0); waiting for it (retried every 500 ms)
+ *    can: interface "can0" is down (ip link set can0 up type can bitrate 500000); waiting for it (retried every 500 ms)
+ * and poll() reopens it as after a link loss (below; that first join does not
+ * count in restarts). Every other problem is
+ * one the interface appearing would not fix, and open() fails naming it:
+ *    can: "can0:1" is not a valid interface name (1 to 15 characters, no '/', ':' or spaces)
  *    can: this kernel has no SocketCAN support (socket(PF_CAN): Address family not supported by protocol)
- *    can: no CAN interface "can7" (CAN interfaces present: can0, vcan0)
- *    can: no CAN interface "can7" (interfaces present: lo, eth0; none is a CAN interface)
- *    can: interface "can0" is down (ip link set can0 up type can bitrate 500000)
  *    can: interface "eth0" is not a CAN interface
  *    can: interface "can0" does not support CAN FD (MTU 16, not 72: ip link set can0 type can ... fd on)
  * After a failed open() the bus is Closed: send() refuses (tx_errors, false),
@@ -111,6 +119,13 @@ struct SocketCanRead {
 	std::uint32_t drop_count = 0; /* frames the socket lost, a running count */
 };
 
+/* What SocketCanIo::open() found. */
+enum class SocketCanOpenResult : std::uint8_t {
+	Opened,
+	NotReady, /* the interface does not exist or is down: it may come later */
+	Failed, /* anything else (no SocketCAN, not a CAN interface, no CAN FD, a socket error) */
+};
+
 /*
  * The kernel side of a SocketCanBus: a raw CAN socket. The bus talks to it
  * only through this, so the bus's queueing, error and reopening logic can be
@@ -126,13 +141,13 @@ public:
 	SocketCanIo &operator=(const SocketCanIo &) = delete;
 
 	/*
-	 * Open, configure and bind a socket (closing any open one). On failure:
-	 * false, with the message (NUL-terminated, truncated to fit) in error.
-	 * With describe, a missing interface's message lists the interfaces
-	 * present (allocates); without it, never allocates.
+	 * Open, configure and bind a socket (closing any open one). When it is
+	 * not Opened, the message (NUL-terminated, truncated to fit) is in
+	 * error. With describe, a missing interface's message lists the
+	 * interfaces present (allocates); without it, never allocates.
 	 */
-	virtual bool open(const SocketCanOpenRequest &request, bool describe,
-			  std::span<char> error) = 0;
+	virtual SocketCanOpenResult open(const SocketCanOpenRequest &request, bool describe,
+					 std::span<char> error) = 0;
 	virtual void close() = 0;
 	/* Write one CAN_MTU or CANFD_MTU sized frame: 0, or the errno. */
 	virtual int write(const void *frame, std::size_t size) = 0;
@@ -183,6 +198,7 @@ private:
 	std::vector<can_filter> kernel_filters_;
 	std::uint32_t kernel_drops_ = 0; /* the socket's drop count last seen */
 	std::int64_t next_reopen_ns_ = 0;
+	bool never_up_ = false; /* opened Down (the interface was missing or down) and not yet up */
 };
 
 /* The pure parts, exposed for tests. None allocates unless it returns a std::string. */

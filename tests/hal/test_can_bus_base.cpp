@@ -30,10 +30,10 @@ namespace {
 class AcceptingIo : public SocketCanIo
 {
 public:
-	bool open(const SocketCanOpenRequest &, bool, std::span<char>) override
+	SocketCanOpenResult open(const SocketCanOpenRequest &, bool, std::span<char>) override
 	{
 		open_ = true;
-		return true;
+		return SocketCanOpenResult::Opened;
 	}
 	void close() override { open_ = false; }
 	int write(const void *, std::size_t) override { return 0; }

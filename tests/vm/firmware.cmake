@@ -9,6 +9,8 @@
 #                                       arm64 VM
 #   vm_aarch64_replay_matches_x86_64    rendered frames of the target replayed by both builds;
 #                                       their pose frames equal within the protocol's steps
+#   vm_x86_64_dockposed_late_can        dockposed started before its CAN interface (can0)
+#                                       exists; can0 created seconds later; poses then arrive
 #
 # All three belong to the host build (not cross-compiling, x86_64): it has the x86_64
 # dockposed, the dockpose tool that renders the frames, and the python that decodes the CAN
@@ -51,6 +53,8 @@ else()
 		board x86_64 $<TARGET_FILE:dockposed> ${_fw_out}/x86_64-board)
 	_dockpose_fw_test(vm_aarch64_dockposed_vm_board vm_kernel_aarch64
 		board aarch64 ${_fw_aarch64} ${_fw_out}/aarch64-board)
+	_dockpose_fw_test(vm_x86_64_dockposed_late_can vm_kernel_x86_64
+		late-can x86_64 $<TARGET_FILE:dockposed> $<TARGET_FILE:dockpose> ${_fw_out}/x86_64-late-can)
 	_dockpose_fw_test(vm_aarch64_replay_matches_x86_64 "vm_kernel_x86_64;vm_kernel_aarch64"
 		replay $<TARGET_FILE:dockposed> ${_fw_aarch64} $<TARGET_FILE:dockpose> ${_fw_out}/replay)
 endif()

@@ -18,6 +18,9 @@ decodings compared, and the gpio-sim samples.
   firmware_check.py replay --truth TRUTH --frames N DIR_A DIR_B
       check two `firmware_guest.sh replay` recordings of the same frames against each other
       and against the render truth
+  firmware_check.py late-can DIR
+      check a `firmware_guest.sh late-can` recording: dockposed started without can0, said so
+      once, joined can0 when it came, and its poses then arrived
 
 Prints "ok: ..." and "FAILED: ..." lines; exit 0 when every check passed, 1 otherwise, 2 on
 usage errors or when a decoder cannot run.
@@ -57,6 +60,8 @@ STATES = ["STARTUP", "SEARCHING", "TRACKING", "DEGRADED", "FAULT", "SHUTDOWN"]
 STROBES = ["OFF", "CONSTANT", "ALTERNATE", "UNCHANGED"]
 MODES = ["TRACK", "SEARCH_ONLY"]
 FAULT_COMMAND_REJECTED = 0x80
+FAULT_CAN_BUS_OFF = 0x10
+PROBE_LATE_ID = 0x7FE
 
 
 class Fatal(Exception):
@@ -735,6 +740,84 @@ def check_replay(truth_path, count, folders):
 	return c
 
 
+def interfaces_of(path):
+	"""[(timestamp, interface, id)] of a candump -L log (candump any names each frame's)."""
+	out = []
+	for line in pathlib.Path(path).read_text(encoding="ascii").splitlines():
+		m = LINE.match(line.strip())
+		if m:
+			out.append((float(m.group(1)), m.group(2), int(m.group(3), 16)))
+	return out
+
+
+def check_late_can(folder):
+	c = Checks()
+	folder = pathlib.Path(folder)
+	rec = Recording(c, folder, "late-can")
+	rec.check_no_hang()
+	log = rec.dockposed_log()
+	c.check(rec.dockposed_rc() == 0, "dockposed ran until SIGTERM and exited 0, without a restart",
+			f"status {rec.dockposed_rc()}; stderr:\n{log}")
+	lines = log.splitlines()
+	waiting = [i for i, line in enumerate(lines) if line.startswith('dockposed: can: no CAN interface "can0"')]
+	board = [i for i, line in enumerate(lines) if line.startswith("dockposed: board ")]
+	up = [i for i, line in enumerate(lines) if line.startswith("dockposed: can: socketcan:can0 is up")]
+	c.check(len(waiting) == 1 and "waiting for it (retried every 500 ms)" in lines[waiting[0]],
+			"stderr says once that can0 is missing and waited for",
+			f"{len(waiting)} such lines; stderr:\n{log}")
+	c.check(len(board) == 1 and waiting and waiting[0] < board[0],
+			"... before start-up ended (camera and strobe running without the bus)", log)
+	c.check(len(up) == 1 and "(restarts 0)" in lines[up[0]] and board and up[0] > board[0],
+			"stderr says once that can0 is up, later, and joining late is no restart", log)
+	c.check(not any("lost can0" in line for line in lines), "the bus was never lost after the join", log)
+	m = re.search(r"^dockposed: ([\d.]+) s: (\d+) frames .*$", log, re.M)
+	if m:
+		c.info(m.group(0))
+
+	# Where dockposed's frames went: only can0 (candump listened on every interface).
+	seen = interfaces_of(folder / "can.log")
+	own = [(t, i) for t, i, can_id in seen if can_id in DOCKPOSED_IDS]
+	elsewhere = sorted({i for _, i in own if i != "can0"})
+	c.check(own and not elsewhere, f"all {len(own)} of dockposed's frames are on can0",
+			f"also on {elsewhere}")
+	_, marks = gpio_samples(folder)
+	probe = [t for t, i, can_id in seen if i == "can0" and can_id == PROBE_LATE_ID]
+	if all(marks.get(k) for k in ("started", "can0-added", "can0-up", "can0-probe", "can0-probe-sent")) and probe:
+		# candump's clock minus /proc/uptime, from the probe bracketed by marks.
+		lo = probe[0] - marks["can0-probe-sent"][0] - UPTIME_RES_S
+		hi = probe[0] - marks["can0-probe"][0]
+		first = own[0][0] - hi if own else None
+		c.info(f"can0 absent for {marks['can0-added'][0] - marks['started'][0]:.1f} s after start-up, "
+			   f"down {marks['can0-up'][0] - marks['can0-added'][0]:.1f} s; first dockposed frame on can0 "
+			   f"{(first - marks['can0-up'][0]) * 1000:.0f} ms after the mark written once `ip link set can0 up` "
+			   f"returned (clock tie within "
+			   f"{(hi - lo) * 1000:.0f} ms)" if first is not None else "no dockposed frame")
+		c.check(first is not None and first >= marks["can0-up"][0] - (hi - lo),
+				"no dockposed frame before can0 was up")
+	else:
+		c.fail(f"the guest's marks or the can0 probe are missing: marks {sorted(marks)}, probe {probe}")
+
+	rec.check_decoding()
+	poses = poses_from_canmatrix(rec.frames)
+	valid = [r for r in rec.reports if r["valid"]]
+	c.check(len(poses) >= 1 and len(poses) == len({r["frame"] for r in valid}),
+			f"pose frames arrived on can0: {len(poses)} valid poses (canmatrix and candecode agree)",
+			f"canmatrix {len(poses)}, candecode {len(valid)}")
+	# (No TRACKING check: the bus fault keeps the state DEGRADED for degraded_hold_frames after the
+	# join, and the replay's loop jumps back to the first frame; the replay test checks tracking.)
+
+	# CAN_BUS_OFF: set in what was made while the bus was Down (queued, sent on the join), clear
+	# in everything made after; the queue is first in, first out, so no set bit after a clear one.
+	faults = [(f["timestamp"], f["raw"]["FaultBits"]) for f in rec.frames
+			  if f["message"] in ("DP_Status", "DP_Heartbeat")]
+	bits = [bool(b & FAULT_CAN_BUS_OFF) for _, b in faults]
+	first_clear = bits.index(False) if False in bits else None
+	c.check(first_clear is not None and not any(bits[first_clear:]),
+			f"CAN_BUS_OFF only in the {first_clear} frames made while can0 was missing or down "
+			f"(queued), clear from then on", f"bits {''.join('1' if b else '0' for b in bits[:80])}")
+	return c
+
+
 # --------------------------------------------------------------------------- replay board
 
 
@@ -743,7 +826,7 @@ def write_replay_board(args):
 	camera = json.loads(pathlib.Path(args.camera).read_text())
 	cam = board["camera"]
 	cam["backend"] = "replay"
-	cam["replay"] = {"folder": str(pathlib.Path(args.frames).resolve()), "loop": False}
+	cam["replay"] = {"folder": str(pathlib.Path(args.frames).resolve()), "loop": args.loop}
 	cam["width"], cam["height"] = camera["width"], camera["height"]
 	cam["frame_rate_hz"] = args.rate
 	cam["buffer_count"] = 16
@@ -751,6 +834,8 @@ def write_replay_board(args):
 	board["pipeline"]["target"] = str(pathlib.Path(args.target).resolve())
 	# The replayed frames show the LEDs whatever the line does: process every frame.
 	board["strobe"]["mode"] = "off"
+	if args.interface:
+		board["can"]["interface"] = args.interface
 	pathlib.Path(args.out).write_text(json.dumps(board, indent="\t") + "\n")
 
 
@@ -769,6 +854,8 @@ def main(argv):
 	rb.add_argument("--target", required=True)
 	rb.add_argument("--frames", required=True)
 	rb.add_argument("--rate", type=float, required=True)
+	rb.add_argument("--loop", action="store_true", help="replay the frames over and over")
+	rb.add_argument("--interface", help="the CAN interface (default: the board's)")
 	rb.add_argument("-o", "--out", required=True)
 	bd = sub.add_parser("board")
 	bd.add_argument("folder")
@@ -776,6 +863,8 @@ def main(argv):
 	rp.add_argument("--truth", required=True)
 	rp.add_argument("--frames", type=int, required=True)
 	rp.add_argument("folders", nargs=2)
+	lc = sub.add_parser("late-can")
+	lc.add_argument("folder")
 	args = p.parse_args(argv)
 
 	try:
@@ -787,8 +876,12 @@ def main(argv):
 		if args.cmd == "replay-board":
 			write_replay_board(args)
 			return 0
-		checks = check_board(args.folder) if args.cmd == "board" else check_replay(
-			args.truth, args.frames, args.folders)
+		if args.cmd == "board":
+			checks = check_board(args.folder)
+		elif args.cmd == "late-can":
+			checks = check_late_can(args.folder)
+		else:
+			checks = check_replay(args.truth, args.frames, args.folders)
 	except Fatal as exc:
 		print(f"firmware_check: {exc}", file=sys.stderr)
 		return 2

@@ -22,14 +22,23 @@
 #                     mode were sent; then SIGTERM.
 #   firmware_guest.sh replay OUT DOCKPOSED BOARD MAX_S
 #       dockposed --board BOARD --for MAX_S (a replay board: it stops when the frames run out).
+#   firmware_guest.sh late-can OUT DOCKPOSED BOARD MAX_S ABSENT_S REPORTS
+#       the late CAN interface: BOARD (a looping replay board on can0) is started while can0
+#       does not exist; once dockposed's start-up is over (its stderr has the board line), it
+#       runs ABSENT_S more seconds without it (its frames go into its queue); then can0 is
+#       added (a vcan), left down for a second, and set up; the run ends with SIGTERM when
+#       REPORTS status frames with a valid pose went out on can0.
+#       candump listens on every interface ("any"), so it sees can0 from its creation on.
 #
 # Files in OUT:
-#   can.log          candump -L vcan0, from before dockposed starts until after it exits
+#   can.log          candump -L vcan0 (late-can: candump -L any), from before dockposed starts
+#                    until after it exits
 #   gpio.txt         "UPTIME_S VALUE" samples of the gpio-sim line dockposed drives
 #                    ($DOCKPOSE_GPIO_SIM_DIR/sim_gpio3/value), polled with shell builtins only,
 #                    and "UPTIME_S mark NAME" lines (start, running, bad-command,
 #                    bad-command-sent (one pair per try), good-command, good-command-sent,
-#                    changed, stop, exit); a NAME and NAME-sent pair brackets a cansend, which
+#                    changed, stop, exit; late-can: started, can0-added, can0-up, can0-probe,
+#                    can0-probe-sent); a NAME and NAME-sent pair brackets a cansend, which
 #                    ties candump's clock to /proc/uptime for the host's checks
 #   gpio-after.txt   the line's value read after dockposed exited (the line is released)
 #   gpioinfo.txt     gpioinfo of the chip while dockposed holds the line
@@ -174,8 +183,12 @@ BOARD=$4
 case $mode in
 board) [ $# -eq 12 ] || die "board: want OUT DOCKPOSED BOARD MAX_S BAD_FRAME GOOD_FRAME ALT_HB HOLD_HB TRIES CONST_HB CONST_REPORTS" ;;
 replay) [ $# -eq 5 ] || die "replay: want OUT DOCKPOSED BOARD MAX_S" ;;
-*) die "unknown mode '$mode' (board or replay)" ;;
+late-can) [ $# -eq 7 ] || die "late-can: want OUT DOCKPOSED BOARD MAX_S ABSENT_S REPORTS" ;;
+*) die "unknown mode '$mode' (board, replay or late-can)" ;;
 esac
+if [ "$mode" = late-can ] && [ -e /sys/class/net/can0 ]; then
+	die "can0 exists before the test: it must be created late"
+fi
 [ -d "$OUT" ] || die "$OUT: no such folder"
 [ -x "$DOCKPOSED" ] || die "$DOCKPOSED: not an executable"
 for tool in candump cansend gpioinfo cam; do
@@ -197,7 +210,9 @@ fi
 
 # candump first, and proven to be listening: a probe frame (id 0x7ff, not dockpose's) must
 # come back before dockposed starts. candump flushes each line.
-candump -L vcan0 >can.log 2>candump.err &
+dump_if=vcan0
+[ "$mode" = late-can ] && dump_if=any
+candump -L "$dump_if" >can.log 2>candump.err &
 dump=$!
 tries=0
 # (However long candump takes to start here; the count only guards a hang.)
@@ -226,13 +241,53 @@ deadline_s=$(($(uptime_whole_s) + $5 + SLACK_S))
 "$DOCKPOSED" --board "$BOARD" --for "$5" >dockposed.out 2>dockposed.err &
 daemon=$!
 
+if [ "$mode" = late-can ]; then
+	absent_s=$6 reports=$7
+	# Started: start() logs the board line once camera, strobe and CAN are open (CAN Down: can0
+	# is not there). No frame can be on any bus yet.
+	until grep -q '^dockposed: board ' dockposed.err; do
+		kill -0 "$daemon" 2>/dev/null || break
+		past_deadline && break
+		sleep 0.1
+	done
+	mark started
+	# Running without its bus.
+	sleep "$absent_s"
+	ip link add dev can0 type vcan || die "ip link add dev can0 type vcan failed"
+	mark can0-added
+	sleep 1
+	ip link set can0 up || die "ip link set can0 up failed"
+	mark can0-up
+	# A frame on can0 bracketed by marks ties candump's clock to /proc/uptime.
+	mark can0-probe
+	cansend can0 7FE#00 || echo "firmware_guest: cansend can0 failed" >&2
+	mark can0-probe-sent
+	# Status frames (0x305) on can0 with PoseValid (byte 0, bit 4).
+	valid_on_can0() {
+		awk '$2 == "can0" { n = split($3, f, "#"); if (n >= 2 && f[1] == "305" &&
+			int(index("0123456789ABCDEF", toupper(substr(f[2], 1, 1))) - 1) % 2 == 1) v++ }
+			END { print v + 0 }' can.log
+	}
+	while [ "$(valid_on_can0)" -lt "$reports" ]; do
+		kill -0 "$daemon" 2>/dev/null || break
+		if past_deadline; then
+			hang_report "$daemon" "fewer than $reports valid poses on can0 $SLACK_S s past --for $5"
+			break
+		fi
+		sleep 0.3
+	done
+	mark stop
+	stop_daemon "after $reports valid poses on can0"
+fi
+
 # The first heartbeat (id 0x306) says dockposed has started (starting takes seconds in the
 # arm64 guest): the phases count from it. A start-up that blocked ends with status 75
 # (dockposed --startup-timeout; libcamera's start has deadlocked now and then in the arm64
 # guest, its threads all waiting on futexes): systemd would restart it (Restart=on-failure),
 # and so does this script, once, keeping the first run's stderr in startup-hang.err.
 restarted=0 reaped=0 rc=0
-while :; do
+# (late-can: dockposed was started and stopped above, and never sends on vcan0.)
+while [ "$mode" != late-can ]; do
 	until grep -q ' vcan0 306#' can.log; do
 		kill -0 "$daemon" 2>/dev/null || break
 		past_deadline && break

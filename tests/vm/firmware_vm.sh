@@ -15,6 +15,10 @@
 #   firmware_vm.sh [--timeout S] replay DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT
 #       frames of the wedge target rendered with `dockpose render`, replayed by both builds in
 #       their VMs on a replay variant of the vm board; their pose frames compared.
+#   firmware_vm.sh [--timeout S] late-can ARCH DOCKPOSED DOCKPOSE_TOOL OUT
+#       the CAN interface comes after dockposed: the replay board, looping, on can0, started in
+#       the ARCH VM while can0 does not exist; can0 is created a few seconds later, and pose
+#       frames must then arrive on it, with no restart of dockposed.
 #
 # OUT is emptied and used as the VMs' share; everything recorded stays there.
 # Exit status: 0 passed, 1 failed, 77 the VM cannot run here (ctest: skipped).
@@ -41,6 +45,10 @@ MAX_S=${DOCKPOSE_VM_FW_MAX_S:-240}
 # camera never skips a frame, it queues them).
 REPLAY_FRAMES=30
 REPLAY_RATE_HZ=10
+# The late-can run: seconds dockposed runs without can0 after its start-up, and the valid poses
+# on can0 that end it.
+LATE_ABSENT_S=4
+LATE_REPORTS=20
 
 timeout_s=600
 
@@ -125,17 +133,10 @@ board_test() {
 	"$CHECK" board "$out"
 }
 
-replay_test() {
-	[[ $# -eq 4 ]] || die "replay: want DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT"
-	local x86=$1 arm=$2 tool=$3 out=$4
-	need_dockposed x86_64 "$x86"
-	need_dockposed aarch64 "$arm"
-	[[ -x $tool ]] || die "no dockpose tool at $tool"
-	fresh_dir "$out"
-	mkdir -p "$out/x86_64" "$out/aarch64"
-
+# render_frames TOOL OUT: the replayed approach, REPLAY_FRAMES frames into OUT/frames.
+render_frames() {
+	local tool=$1 out=$2 poses=() i
 	# An approach: 1400 mm to 550 mm, drifting to the centre, rotations easing off.
-	local poses=() i
 	for ((i = 0; i < REPLAY_FRAMES; i++)); do
 		poses+=("--pose=$(awk -v i=$i -v n=$REPLAY_FRAMES 'BEGIN {
 			s = i / (n - 1)
@@ -145,6 +146,36 @@ replay_test() {
 	"$tool" render --target "$REPO/board/vm/target.json" --camera "$REPO/board/vm/camera-replay.json" \
 		"${poses[@]}" --reflections 1 --hot-pixels 10 -o "$out/frames" >/dev/null ||
 		die "dockpose render failed"
+}
+
+late_can_test() {
+	[[ $# -eq 4 ]] || die "late-can: want ARCH DOCKPOSED DOCKPOSE_TOOL OUT"
+	local arch=$1 dockposed=$2 tool=$3 out=$4
+	[[ $arch == arm64 ]] && arch=aarch64
+	need_dockposed "$arch" "$dockposed"
+	[[ -x $tool ]] || die "no dockpose tool at $tool"
+	fresh_dir "$out"
+	render_frames "$tool" "$out"
+	"$CHECK" replay-board --board "$BOARD" --camera "$REPO/board/vm/camera-replay.json" \
+		--target "$REPO/board/vm/target.json" --frames "$out/frames" --rate "$REPLAY_RATE_HZ" \
+		--loop --interface can0 -o "$out/board-late-can.json" || die "cannot write the late-can board"
+	echo "late-can: replay board on can0 ($out/board-late-can.json), can0 created $LATE_ABSENT_S s" \
+		"after dockposed's start-up; ends after $LATE_REPORTS valid poses on can0; --for $MAX_S s as a cap"
+	in_vm "$arch" "$out" late-can "$out" "$dockposed" "$out/board-late-can.json" "$MAX_S" \
+		"$LATE_ABSENT_S" "$LATE_REPORTS"
+	echo "== checks ($out)"
+	"$CHECK" late-can "$out"
+}
+
+replay_test() {
+	[[ $# -eq 4 ]] || die "replay: want DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT"
+	local x86=$1 arm=$2 tool=$3 out=$4
+	need_dockposed x86_64 "$x86"
+	need_dockposed aarch64 "$arm"
+	[[ -x $tool ]] || die "no dockpose tool at $tool"
+	fresh_dir "$out"
+	mkdir -p "$out/x86_64" "$out/aarch64"
+	render_frames "$tool" "$out"
 	"$CHECK" replay-board --board "$BOARD" --camera "$REPO/board/vm/camera-replay.json" \
 		--target "$REPO/board/vm/target.json" --frames "$out/frames" --rate "$REPLAY_RATE_HZ" \
 		-o "$out/board-replay.json" || die "cannot write the replay board"
@@ -168,11 +199,12 @@ while [[ $# -gt 0 ]]; do
 	*) break ;;
 	esac
 done
-[[ $# -ge 1 ]] || die "usage: firmware_vm.sh [--timeout S] board|replay ..."
+[[ $# -ge 1 ]] || die "usage: firmware_vm.sh [--timeout S] board|replay|late-can ..."
 cmd=$1
 shift
 case $cmd in
 board) board_test "$@" ;;
 replay) replay_test "$@" ;;
-*) die "unknown test '$cmd' (board or replay)" ;;
+late-can) late_can_test "$@" ;;
+*) die "unknown test '$cmd' (board, replay or late-can)" ;;
 esac

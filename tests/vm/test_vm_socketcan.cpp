@@ -22,10 +22,13 @@
  *    kernel already held (txqueuelen frames) and frames still in time. Needs
  *    CONFIG_NET_SCHED and CONFIG_NET_SCH_TBF in the test kernel (skipped, saying
  *    so, without); tc qdisc show is the witness of the setup
- *  - a missing interface (the message lists the CAN interfaces present), one
- *    that is down, one set down while open, and one deleted while open and added
- *    again: state Down, frames queue, the bus reopens by itself with its filters
- *    (restarts counted) and the queued frames go out.
+ *  - a missing interface at open() (the message lists the CAN interfaces
+ *    present) and one that is down at open(): open() succeeds, state Down, and
+ *    the bus joins the interface when it is added and up (no restart counted);
+ *    one that is not a CAN interface: open() fails. One set down while open, and
+ *    one deleted while open and added again: state Down, frames queue, the bus
+ *    reopens by itself with its filters (restarts counted) and the queued frames
+ *    go out.
  *
  * The VM's guest-init.sh creates vcan0 and vcan1 (up); tests that change them
  * put them back. Outside a test VM the program exits 77 (skipped).
@@ -788,41 +791,81 @@ TEST(VcanSocketCan, SlowQdiscEnobufsQueueDropsOldestExpiresLateAndFlowsAgain)
 	EXPECT_EQ(seqOf(later[1]), 101);
 }
 
-TEST(VcanSocketCan, MissingInterfaceIsNamedWithTheOnesPresent)
+/* Poll the bus until it is ErrorActive (30 s: a hang guard only; it ends at the reopening). */
+bool pollUntilUp(SocketCanBus &bus)
+{
+	return waitUntil(
+		[&] {
+			bus.poll();
+			return bus.stats().state == CanState::ErrorActive;
+		},
+		30000);
+}
+
+/* An interface that does not exist at open(): Down, named with the ones present, joined when it
+ * is added (the late can0 of a board whose CAN driver or adapter comes after dockposed). */
+TEST(VcanSocketCan, MissingInterfaceIsWaitedForAndJoinedWhenAdded)
 {
 	SocketCanBus bus("vcan7");
 	const auto status = bus.open(kAcceptAll, CanOptions{});
-	ASSERT_FALSE(status.isOk());
-	EXPECT_EQ(status.message(),
-		  "can: no CAN interface \"vcan7\" (CAN interfaces present: vcan0, vcan1)");
-	EXPECT_EQ(bus.lastError(), status.message());
-	EXPECT_EQ(bus.stats().state, CanState::Closed);
+	ASSERT_TRUE(status.isOk()) << status.message();
+	EXPECT_EQ(bus.lastError(),
+		  "can: no CAN interface \"vcan7\" (CAN interfaces present: vcan0, vcan1); "
+		  "waiting for it (retried every 500 ms)");
+	EXPECT_EQ(bus.stats().state, CanState::Down);
 	EXPECT_EQ(bus.fd(), -1);
-	EXPECT_FALSE(bus.send(classicFrame(0x100, { 1 })));
-	EXPECT_EQ(bus.stats().tx_errors, 1u) << "a send on a closed bus is refused (CanBusBase)";
-	EXPECT_EQ(bus.stats().tx_dropped, 0u);
+	for (int i = 0; i < 2; ++i)
+		EXPECT_TRUE(bus.send(numberedFrame(0x260, i)));
+	EXPECT_EQ(bus.stats().tx_queued, 2u);
+	EXPECT_EQ(bus.stats().tx_errors, 0u);
 	bus.poll();
-	EXPECT_EQ(bus.stats().state, CanState::Closed)
-		<< "nothing is retried after a failed open()";
+	EXPECT_EQ(bus.stats().state, CanState::Down);
 
-	SocketCanBus lo("lo");
-	const auto not_can = lo.open({}, CanOptions{});
-	EXPECT_EQ(not_can.message(), "can: interface \"lo\" is not a CAN interface");
+	mustRun("ip link add dev vcan7 type vcan");
+	bus.poll();
+	mustRun("ip link set vcan7 up");
+	SocketCanBus witness("vcan7");
+	openWitness(witness);
+	ASSERT_TRUE(pollUntilUp(bus)) << canStateName(bus.stats().state) << ": " << bus.lastError();
+	EXPECT_EQ(bus.stats().restarts, 0u) << "joining late is no restart";
+	EXPECT_GE(bus.fd(), 0);
+	const std::vector<CanFrame> got = receiveFrames(witness, 2, 5000);
+	ASSERT_EQ(got.size(), 2u) << "the frames queued while it was missing";
+	EXPECT_EQ(seqOf(got[0]), 0);
+	EXPECT_EQ(seqOf(got[1]), 1);
+	mustRun("cansend vcan7 261#07");
+	const std::vector<CanFrame> rx = receiveFrames(bus, 1, 5000);
+	ASSERT_EQ(rx.size(), 1u) << "the filters of open() are on the late socket";
+	EXPECT_EQ(rx[0].id, 0x261u);
 }
 
-TEST(VcanSocketCan, DownInterfaceIsRefusedThenOpens)
+/* What no interface coming up would fix stays an open() failure, never retried. */
+TEST(VcanSocketCan, NotACanInterfaceIsRefused)
+{
+	SocketCanBus lo("lo");
+	const auto not_can = lo.open({}, CanOptions{});
+	ASSERT_FALSE(not_can.isOk());
+	EXPECT_EQ(not_can.message(), "can: interface \"lo\" is not a CAN interface");
+	EXPECT_EQ(lo.stats().state, CanState::Closed);
+	EXPECT_FALSE(lo.send(classicFrame(0x100, { 1 })));
+	EXPECT_EQ(lo.stats().tx_errors, 1u) << "a send on a closed bus is refused (CanBusBase)";
+	lo.poll();
+	EXPECT_EQ(lo.stats().state, CanState::Closed) << "nothing is retried after a failed open()";
+}
+
+/* An interface that exists but is down at open() (networkd has not configured it yet). */
+TEST(VcanSocketCan, DownInterfaceIsWaitedForThenJoined)
 {
 	mustRun("ip link set vcan1 down");
 	SocketCanBus bus("vcan1");
 	const auto status = bus.open({}, CanOptions{});
+	ASSERT_TRUE(status.isOk()) << status.message();
+	EXPECT_EQ(bus.lastError(), "can: interface \"vcan1\" is down (ip link set vcan1 up); "
+				   "waiting for it (retried every 500 ms)");
+	EXPECT_EQ(bus.stats().state, CanState::Down);
 	restoreVcan1();
-	ASSERT_FALSE(status.isOk());
-	EXPECT_EQ(status.message(), "can: interface \"vcan1\" is down (ip link set vcan1 up)");
-	EXPECT_EQ(bus.stats().state, CanState::Closed);
-
-	const auto reopened = bus.open({}, CanOptions{});
-	EXPECT_TRUE(reopened.isOk()) << reopened.message();
-	EXPECT_EQ(bus.stats().state, CanState::ErrorActive);
+	EXPECT_TRUE(pollUntilUp(bus)) << canStateName(bus.stats().state) << ": " << bus.lastError();
+	EXPECT_EQ(bus.stats().restarts, 0u);
 }
 
 TEST(VcanSocketCan, InterfaceSetDownWhileOpenGoesDownAndComesBack)
@@ -939,7 +982,12 @@ TEST(VcanSocketCan, InterfaceDeletedWhileOpenReopensWhenAddedAgain)
 
 class RestoreInterfaces : public ::testing::EmptyTestEventListener
 {
-	void OnTestEnd(const ::testing::TestInfo &) override { restoreVcan1(); }
+	void OnTestEnd(const ::testing::TestInfo &) override
+	{
+		restoreVcan1();
+		if (interfaceExists("vcan7"))
+			(void)run("ip link del vcan7");
+	}
 };
 
 int main(int argc, char **argv)
