@@ -84,12 +84,16 @@ struct CanSection : hal::CanOptions {
 	std::string backend; /* one the board wires (board::backendNames): "socketcan", "file" */
 	std::string interface; /* socketcan: "can0" */
 	std::string log_file; /* file: candump -l log written here (--can-log overrides) */
-	std::uint32_t base_id = 0x300; /* 11-bit; base_id .. base_id + 0x10 are used */
+	std::uint32_t base_id = 0x300; /* 11-bit; base_id .. base_id + 0x11 are used */
 	int bitrate = 500000; /* the bus's bit rate, for the bus-load check and docs */
 	int heartbeat_hz = 10;
 	/* A report still waiting for the bus this long after it was queued is dropped unsent
 	 * (CanStats::tx_expired); 0: one camera frame period. */
 	int max_report_age_us = 0;
+	/* Authentication (docs/can-protocol.md): the 128-bit key's file (empty: frames are not
+	 * authenticated), and the state file of the run counter the freshness values start from. */
+	std::string key_file;
+	std::string run_counter_file = "/var/lib/dockpose/can-run-counter";
 };
 
 struct PipelineSection {

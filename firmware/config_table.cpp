@@ -309,7 +309,7 @@ const Field<CanSection> kCanFields[] = {
 	{ .key = "base_id",
 	  .kind = Kind::CanId,
 	  .member = &CanSection::base_id,
-	  .doc = "First CAN id of the protocol; the frames use base_id .. base_id + 0x10." },
+	  .doc = "First CAN id of the protocol; the frames use base_id .. base_id + 0x11." },
 	{ .key = "bitrate",
 	  .kind = Kind::OneOf,
 	  .member = &CanSection::bitrate,
@@ -339,6 +339,21 @@ const Field<CanSection> kCanFields[] = {
 		 "Status-only reports and heartbeats expire after one heartbeat interval.",
 	  .range = { 0, 1000000 },
 	  .unit = "us" },
+	{ .key = "key_file",
+	  .kind = Kind::Path,
+	  .member = &CanSection::key_file,
+	  .doc = "The 128-bit AES key that authenticates the CAN frames (AES-128-CMAC, "
+		 "docs/can-protocol.md): 32 hexadecimal digits in a regular file of mode 0600 or "
+		 "0400 owned by root or the daemon's user. Set, the sensor signs its reports and "
+		 "heartbeats and accepts only signed commands; empty, nothing is authenticated "
+		 "(the heartbeat's Authenticated bit says which).",
+	  .empty_ok = true },
+	{ .key = "run_counter_file",
+	  .kind = Kind::Path,
+	  .member = &CanSection::run_counter_file,
+	  .doc = "With `key_file`: the state file of the run counter (a number, +1 at every "
+		 "start) the freshness values of a run start from, so that none repeats an "
+		 "earlier run's. It must be writable (systemd: StateDirectory=dockpose)." },
 };
 
 const Field<PipelineSection> kPipelineFields[] = {

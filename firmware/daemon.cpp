@@ -7,6 +7,7 @@
 #include <string>
 #include <thread>
 
+#include "firmware/can_auth.h"
 #include "firmware/modes.h"
 #include "hal/clock.h"
 
@@ -29,6 +30,9 @@ constexpr int kMaxFailedRestarts = 5;
  * few frames late, and the background they give must be re-measured.
  */
 constexpr int kWholeFramesAfterLightChange = 4;
+/* A command must answer one of the sensor's last this many freshness values (DP_Auth frames:
+ * about 3.6 s at 60 frames/s, 25 s when only heartbeats go out). */
+constexpr std::uint64_t kCommandFreshnessWindow = 256;
 
 hal::CanFrame toHal(const can::RawFrame &raw, std::int64_t deadline_ns)
 {
@@ -134,10 +138,12 @@ hal::Status Daemon::start()
 	if (auto s = backends_.strobe_control->start(); !s)
 		return hal::Status::error("strobe: " + s.message());
 
-	const hal::CanFilter commands{ config_.can.base_id + can::kCommand, 0x7ff, false };
-	if (auto s =
-		    backends_.can->open(std::span<const hal::CanFilter>(&commands, 1), config_.can);
-	    !s)
+	if (auto s = startAuthentication(); !s)
+		return s;
+	const hal::CanFilter commands[] = { { config_.can.base_id + can::kCommand, 0x7ff, false },
+					    { config_.can.base_id + can::kCommandAuth, 0x7ff,
+					      false } };
+	if (auto s = backends_.can->open(commands, config_.can); !s)
 		return hal::Status::error("can: " + s.message());
 	/* An interface that is missing or down is waited for (the bus says so once, here). */
 	logCanLink();
@@ -513,8 +519,9 @@ void Daemon::sendHeartbeat(std::int64_t now_ns)
 	hb.enabled = enabled_;
 	hb.faults = activeFaults(now_ns);
 	hb.frame_rate_hz = frame_rate_hz_;
-	const can::RawFrame frame = encoder_.encodeHeartbeat(hb);
-	sendFrames(&frame, 1, next_heartbeat_ns_);
+	can::RawFrame frames[can::kMaxHeartbeatFrames];
+	const int n = encoder_.encodeHeartbeat(hb, frames);
+	sendFrames(frames, n, next_heartbeat_ns_);
 	++stats_.heartbeats;
 }
 
@@ -534,7 +541,7 @@ can::StatusData Daemon::statusFor(SensorState state, std::uint8_t faults) const
 int Daemon::sendReport(const can::StatusData &status, const can::PoseData *pose,
 		       std::int64_t deadline_ns)
 {
-	can::RawFrame frames[can::kReportFrames];
+	can::RawFrame frames[can::kMaxReportFrames];
 	const int n = encoder_.encodeReport(status, pose, frames);
 	sendFrames(frames, n, deadline_ns);
 	return n;
@@ -545,6 +552,33 @@ void Daemon::sendFrames(const can::RawFrame *frames, int count, std::int64_t dea
 	for (int i = 0; i < count; ++i)
 		if (!backends_.can->send(toHal(frames[i], deadline_ns)))
 			++stats_.can_send_drops;
+}
+
+/* With can.key_file: the key, the next run number, and the encoder and the command decoder
+ * switched to authenticated frames. Without: said once. */
+hal::Status Daemon::startAuthentication()
+{
+	if (config_.can.key_file.empty()) {
+		std::fprintf(log_, "dockposed: CAN frames are not authenticated (no can.key_file): "
+				   "anyone on the bus can command the sensor or forge its poses\n");
+		return hal::Status::ok();
+	}
+	std::array<std::uint8_t, can::kKeyBytes> key{};
+	if (auto s = loadCanKey(config_.can.key_file, &key); !s)
+		return hal::Status::error("can: " + s.message());
+	const bool keyed = cmac_.setKey(key);
+	key.fill(0);
+	if (!keyed)
+		return hal::Status::error("can: OpenSSL has no AES-128 CMAC");
+	std::uint32_t run = 0;
+	if (auto s = nextRunNumber(config_.can.run_counter_file, &run); !s)
+		return hal::Status::error("can: " + s.message());
+	encoder_.setAuthenticator(&cmac_, static_cast<std::uint64_t>(run) << 32);
+	command_decoder_.setAuthenticator(&cmac_);
+	command_decoder_.setCommandFreshness(&encoder_, kCommandFreshnessWindow);
+	std::fprintf(log_, "dockposed: CAN frames authenticated (AES-128-CMAC, key %s, run %u)\n",
+		     config_.can.key_file.c_str(), run);
+	return hal::Status::ok();
 }
 
 void Daemon::handleCommands()
@@ -561,9 +595,20 @@ void Daemon::handleCommands()
 			applyCommand(command_decoder_.command());
 		} else if (event == can::Decoder::Event::Rejected) {
 			++stats_.commands_rejected;
-			command_rejected_.raise(hal::monotonicNs());
-			std::fprintf(log_, "dockposed: command frame 0x%03x rejected: %s\n", in.id,
-				     can::frameErrorName(command_decoder_.lastError()));
+			const std::int64_t now_ns = hal::monotonicNs();
+			command_rejected_.raise(now_ns);
+			/* A flood of forged frames must not flood the journal: one line a second. */
+			++rejects_unlogged_;
+			if (now_ns - last_reject_log_ns_ >= kNsPerS) {
+				std::fprintf(log_,
+					     "dockposed: command frame 0x%03x rejected: %s (%llu "
+					     "rejected since the last such line)\n",
+					     in.id,
+					     can::frameErrorName(command_decoder_.lastError()),
+					     static_cast<unsigned long long>(rejects_unlogged_));
+				rejects_unlogged_ = 0;
+				last_reject_log_ns_ = now_ns;
+			}
 		}
 	}
 }

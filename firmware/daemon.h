@@ -39,6 +39,7 @@
 #include "firmware/fault_hold.h"
 #include "firmware/latency_histogram.h"
 #include "firmware/protocol/dockpose_can.h"
+#include "firmware/protocol/dockpose_can_cmac.h"
 #include "firmware/state_machine.h"
 #include "firmware/systemd_notify.h"
 
@@ -108,6 +109,7 @@ private:
 	void reportFrame(const hal::Frame &frame, const PoseResult *result);
 
 	void handleStall(std::int64_t now_ns);
+	hal::Status startAuthentication();
 	void handleCommands();
 	void applyCommand(const can::CommandData &command);
 	void applyStrobeMode(StrobeMode mode);
@@ -130,8 +132,11 @@ private:
 	std::unique_ptr<Pipeline> pipeline_;
 	AlternateStrobe alternate_;
 	StateMachine state_machine_;
+	can::OpensslCmac cmac_; /* the CAN key's MAC, when can.key_file is set */
 	can::Encoder encoder_;
 	can::Decoder command_decoder_;
+	std::int64_t last_reject_log_ns_ = 0;
+	std::uint64_t rejects_unlogged_ = 0;
 	SystemdNotifier notifier_;
 	DaemonStats stats_;
 

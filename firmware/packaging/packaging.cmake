@@ -15,6 +15,7 @@
 #   /usr/share/dockpose/candecode             scripts/candecode, unchanged
 #   /usr/share/dockpose/dockpose.dbc          the CAN contract
 #   /usr/include/dockpose/dockpose_can.h      the controller's header-only encoder/decoder
+#   /usr/include/dockpose/dockpose_can_cmac.h its MAC with OpenSSL (authenticated frames)
 #   /etc/dockpose/boards/<name>/              board.json, camera.json, target.json, README.md (conffiles)
 #   /etc/default/dockposed                    which board the service runs (conffile)
 #   /lib/systemd/system/dockposed.service     the service
@@ -43,6 +44,7 @@ install(PROGRAMS ${DOCKPOSE_PACKAGING_DIR}/dockpose-candecode DESTINATION ${CMAK
 # ---- the CAN contract ---------------------------------------------------------------------
 install(FILES ${PROJECT_SOURCE_DIR}/firmware/protocol/dockpose.dbc DESTINATION ${DOCKPOSE_DATA_DIR})
 install(FILES ${PROJECT_SOURCE_DIR}/firmware/protocol/dockpose_can.h
+	${PROJECT_SOURCE_DIR}/firmware/protocol/dockpose_can_cmac.h
 	DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/dockpose)
 
 # ---- boards -------------------------------------------------------------------------------
@@ -129,7 +131,8 @@ string(REGEX MATCH "^[0-9]+\\.[0-9]+" libgpiod_min "${DOCKPOSE_DEB_LIBGPIOD_VERS
 
 # Lower bounds: libc6, libstdc++6 and libgcc-s1 as dpkg-shlibdeps reports them for dockposed built
 # with GCC 12 on Debian 12 (glibc symbol versions up to 2.35); libsystemd0 209 is where sd_notify's
-# symbol version starts; libcamera and libgpiod: the versions built against.
+# symbol version starts; libssl3 3.0 is where EVP_MAC (the CAN authentication's CMAC) starts;
+# libcamera and libgpiod: the versions built against.
 # libcamera-ipa holds the image processing modules; libcamera0.0.3 only suggests it, but no camera
 # pipeline with an ISP (the Raspberry Pi's) starts without it. adduser: postinst creates the user.
 set(dockpose_deb_depends
@@ -137,6 +140,7 @@ set(dockpose_deb_depends
 	"libstdc++6 (>= 12)"
 	"libgcc-s1 (>= 3.4)"
 	"libsystemd0 (>= 209)"
+	"libssl3 (>= 3.0.0)"
 	"libcamera${libcamera_abi} (>= ${libcamera_min})"
 	"libcamera-ipa (>= ${libcamera_min})"
 	"libgpiod${libgpiod_soname} (>= ${libgpiod_min})"

@@ -34,16 +34,15 @@ namespace dockpose::can {
 constexpr std::uint32_t kDefaultBaseId = 0x300;
 /* The base id the DBC is written for: tools subtract (base - kDbcBaseId). */
 constexpr std::uint32_t kDbcBaseId = 0x300;
-/* base .. base + kCommand must stay 11-bit. */
-constexpr std::uint32_t kMaxBaseId = 0x7ff - 0x10;
 constexpr std::uint8_t kFrameLength = 8;
 /* Frames in a report with a pose: six pose frames and the status. */
 constexpr int kReportFrames = 7;
-
-constexpr bool validBaseId(std::uint32_t base_id)
-{
-	return base_id <= kMaxBaseId;
-}
+/* With authentication each report, heartbeat and command is followed by its
+ * MAC frame (and a heartbeat by the freshness frame before it): the most
+ * frames encodeReport(), encodeHeartbeat() and encodeCommand() write. */
+constexpr int kMaxReportFrames = kReportFrames + 1;
+constexpr int kMaxHeartbeatFrames = 3;
+constexpr int kMaxCommandFrames = 2;
 
 enum Offset : std::uint32_t {
 	kTranslation = 0x0,
@@ -54,8 +53,19 @@ enum Offset : std::uint32_t {
 	kStatus = 0x5,
 	kHeartbeat = 0x6,
 	kQuality = 0x7, /* a pose frame, sent before the status */
+	kAuth = 0x8, /* the MAC of the sensor's frames since the previous one */
+	kFreshness = 0x9, /* the sensor's freshness value, high bits (before a heartbeat's MAC) */
 	kCommand = 0x10,
+	kCommandAuth = 0x11, /* the MAC of the command before it */
 };
+
+/* base .. base + kCommandAuth must stay 11-bit. */
+constexpr std::uint32_t kMaxBaseId = 0x7ff - kCommandAuth;
+
+constexpr bool validBaseId(std::uint32_t base_id)
+{
+	return base_id <= kMaxBaseId;
+}
 
 /*
  * Where a scaled signal sits, as its SG_ line in the DBC declares it: the
@@ -88,6 +98,18 @@ constexpr SignalLayout kLog10Nfa{ kQuality, 0, 16, true, 0.1 };
 /* DP_Quality SensorTimeUs: the sensor's CLOCK_MONOTONIC when it encoded the
  * report, in microseconds modulo 2^32 (it wraps every 71.6 minutes). */
 constexpr SignalLayout kSensorTime{ kQuality, 16, 32, false, 1.0 };
+/* DP_Heartbeat Authenticated: 1 when the sensor authenticates its frames. */
+constexpr SignalLayout kAuthenticated{ kHeartbeat, 31, 1, false, 1.0 };
+/* DP_Auth: the low 16 bits of the freshness value the MAC covers, and the MAC
+ * (the first four bytes of the AES-128-CMAC, the first byte most significant). */
+constexpr SignalLayout kAuthFreshness{ kAuth, 0, 16, false, 1.0 };
+constexpr SignalLayout kAuthMac{ kAuth, 16, 32, false, 1.0 };
+/* DP_Freshness: the freshness value's bits 16..63 (the next DP_Auth's). */
+constexpr SignalLayout kFreshnessHigh{ kFreshness, 0, 48, false, 1.0 };
+/* DP_CommandAuth: the low 16 bits of the sensor freshness value the command
+ * answers to, and the MAC. */
+constexpr SignalLayout kCommandFreshness{ kCommandAuth, 0, 16, false, 1.0 };
+constexpr SignalLayout kCommandMac{ kCommandAuth, 16, 32, false, 1.0 };
 } /* namespace layout */
 
 enum class SensorState : std::uint8_t {
@@ -225,11 +247,15 @@ constexpr int worstCaseFrameBits(int data_bytes)
 /* Fraction of the bus (0..1) the sensor takes at `frames_hz` camera frames per
  * second (every one a report with pose: kReportFrames frames), `heartbeat_hz`
  * heartbeats and `command_hz` commands per second, at `bitrate` bit/s,
- * worst-case stuffing. 60 / 10 / 500 kbit/s: 0.1161. */
+ * worst-case stuffing; `authenticated` adds each group's MAC frame (and the
+ * heartbeat's DP_Freshness). 60 / 10 / 500 kbit/s: 0.1161, authenticated 0.1377. */
 constexpr double worstCaseBusLoad(double frames_hz, double heartbeat_hz, double bitrate,
-				  double command_hz = 0.0)
+				  double command_hz = 0.0, bool authenticated = false)
 {
-	return (kReportFrames * frames_hz + heartbeat_hz + command_hz) *
+	const double report = authenticated ? kMaxReportFrames : kReportFrames;
+	const double heartbeat = authenticated ? kMaxHeartbeatFrames : 1;
+	const double command = authenticated ? kMaxCommandFrames : 1;
+	return (report * frames_hz + heartbeat * heartbeat_hz + command * command_hz) *
 	       worstCaseFrameBits(kFrameLength) / bitrate;
 }
 
@@ -263,6 +289,7 @@ struct StatusData {
 
 struct HeartbeatData {
 	std::uint32_t uptime_s = 0; /* saturates at 2^24 - 1 */
+	bool authenticated = false; /* set by the encoder: it has an authenticator */
 	SensorState state = SensorState::Startup;
 	TrackMode mode = TrackMode::Track;
 	StrobeMode strobe = StrobeMode::Off;
@@ -383,22 +410,120 @@ constexpr double get(const std::array<std::uint8_t, 8> &data, const SignalLayout
 	return static_cast<double>(raw) * s.factor;
 }
 
+constexpr std::uint64_t putRaw(const SignalLayout &s, std::uint64_t raw)
+{
+	return field(raw, s.start_bit, s.length_bits);
+}
+constexpr std::uint64_t getRaw(const std::array<std::uint8_t, 8> &data, const SignalLayout &s)
+{
+	return bits(data, s.start_bit, s.length_bits);
+}
+
+/*
+ * What a MAC covers (protocol 3): "DPA3", the base id (2 bytes), then for
+ * each frame of the group its identifier (2 bytes) and its 8 data bytes, then
+ * the 64-bit freshness value and byte 6 of the MAC frame itself (its alive
+ * counter and sequence); integers little-endian. A group is at most a report
+ * (kReportFrames frames).
+ */
+class MacInput
+{
+public:
+	static constexpr std::size_t kMaxFrames = kReportFrames;
+
+	void reset(std::uint32_t base_id)
+	{
+		len_ = 0;
+		frames_ = 0;
+		overflow_ = false;
+		for (char c : { 'D', 'P', 'A', '3' })
+			bytes_[len_++] = static_cast<std::uint8_t>(c);
+		put(base_id, 2);
+	}
+	void add(const RawFrame &frame)
+	{
+		if (frames_ == kMaxFrames) {
+			overflow_ = true;
+			return;
+		}
+		put(frame.id, 2);
+		for (std::uint8_t b : frame.data)
+			bytes_[len_++] = b;
+		++frames_;
+	}
+	std::size_t frames() const { return frames_; }
+	bool overflow() const { return overflow_; }
+	/* The bytes with the freshness value and the MAC frame's byte 6 appended (the group
+	 * itself is kept). */
+	const std::uint8_t *finish(std::uint64_t freshness, std::uint8_t mac_byte6,
+				   std::size_t *len)
+	{
+		std::size_t n = len_;
+		for (int i = 0; i < 8; ++i)
+			bytes_[n++] = static_cast<std::uint8_t>(freshness >> (8 * i));
+		bytes_[n++] = mac_byte6;
+		*len = n;
+		return bytes_.data();
+	}
+
+private:
+	void put(std::uint64_t v, int n)
+	{
+		for (int i = 0; i < n; ++i)
+			bytes_[len_++] = static_cast<std::uint8_t>(v >> (8 * i));
+	}
+
+	std::array<std::uint8_t, 4 + 2 + kMaxFrames * 10 + 8 + 1> bytes_{};
+	std::size_t len_ = 0;
+	std::size_t frames_ = 0;
+	bool overflow_ = false;
+};
+
 /* The pose frames a valid report needs, one bit per offset. */
 constexpr std::uint8_t kPoseFrameMask = (1u << kTranslation) | (1u << kQuatA) | (1u << kQuatB) |
 					(1u << kAngles) | (1u << kSigma) | (1u << kQuality);
 
 constexpr std::size_t slot(std::uint32_t offset)
 {
-	return offset == kCommand ? 8 : offset;
+	return offset >= kCommand ? offset - kCommand + 10 : offset;
 }
 
-constexpr std::size_t kSlots = 9;
+constexpr std::size_t kSlots = 12;
+
+/* One of ours: base .. base + 0x9 and the command's two. */
+constexpr bool knownOffset(std::uint32_t offset)
+{
+	return offset <= kFreshness || offset == kCommand || offset == kCommandAuth;
+}
 
 } /* namespace detail */
 
 /*
+ * The MAC behind authentication (protocol 3, SecOC-style): AES-128-CMAC with
+ * the shared key, truncated to its first four bytes. This header has no
+ * crypto of its own; dockpose_can_cmac.h implements it with OpenSSL, and a
+ * controller may use its HSM instead. mac32() is called for every
+ * authenticated group (from the owner's thread).
+ */
+class MacFunction
+{
+public:
+	virtual ~MacFunction() = default;
+	/* The first four bytes of the CMAC of data[0..len), the first byte in bits 24..31.
+	 * False when it could not be computed (the group is then refused). */
+	virtual bool mac32(const std::uint8_t *data, std::size_t len, std::uint32_t *mac) = 0;
+};
+
+/*
  * Encoder: turns one camera frame's results into frames, keeping the alive
  * counters (per identifier) and the report sequence. Never allocates.
+ *
+ * With an authenticator (setAuthenticator) every group of frames the sensor
+ * sends — a report, or a heartbeat with the freshness frame — is followed by
+ * a DP_Auth frame: the low 16 bits of the sensor's freshness value (+1 per
+ * DP_Auth) and the truncated MAC of the group and the whole value. A
+ * command is followed by DP_CommandAuth, whose MAC covers the command and
+ * the latest sensor freshness value the controller verified.
  */
 class Encoder
 {
@@ -417,10 +542,10 @@ public:
 	 * be sent (pose == nullptr, a translation outside Tx/Ty +-3276.7 mm or
 	 * Tz 0..6553.5 mm, or a non-finite value in t, q or rpy), the status goes
 	 * out with PoseValid cleared and poseDropped() is true until the next
-	 * report. Other fields saturate at their ranges.
+	 * report. Other fields saturate at their ranges. With an authenticator
+	 * the DP_Auth frame follows (kMaxReportFrames in all: out must hold them).
 	 */
-	int encodeReport(const StatusData &status, const PoseData *pose,
-			 RawFrame out[kReportFrames])
+	int encodeReport(const StatusData &status, const PoseData *pose, RawFrame *out)
 	{
 		using namespace detail;
 		const std::uint8_t seq = sequence_;
@@ -495,34 +620,68 @@ public:
 			field(status.faults, 24, 8) |
 			signedField(toRaw(status.latency_ms, kLatencyRes, 0, 65535, 65535), 32, 16);
 		out[n++] = finish(kStatus, seq, st);
+		if (mac_)
+			n = authenticate(out, n, seq);
 		return n;
 	}
 
-	RawFrame encodeHeartbeat(const HeartbeatData &hb)
+	/* The heartbeat frame alone (no authenticator: with one, use the other overload). */
+	RawFrame encodeHeartbeat(const HeartbeatData &hb) { return heartbeatFrame(hb); }
+
+	/* The heartbeat and, with an authenticator, DP_Freshness (the freshness
+	 * value's high bits) and DP_Auth over both. Returns the frames written
+	 * (1 or kMaxHeartbeatFrames). */
+	int encodeHeartbeat(const HeartbeatData &hb, RawFrame *out)
 	{
-		using namespace detail;
-		const std::uint64_t uptime = hb.uptime_s > 0xffffffu ? 0xffffffu : hb.uptime_s;
-		return finish(kHeartbeat, 0,
-			      field(uptime, 0, 24) |
-				      field(static_cast<std::uint64_t>(hb.state), 24, 3) |
-				      field(static_cast<std::uint64_t>(hb.mode), 27, 1) |
-				      field(static_cast<std::uint64_t>(hb.strobe), 28, 2) |
-				      flag(hb.enabled, 30) | field(hb.faults, 32, 8) |
-				      signedField(toRaw(hb.frame_rate_hz, kFrameRateRes, 0, 255, 0),
-						  40, 8));
+		out[0] = heartbeatFrame(hb);
+		if (!mac_)
+			return 1;
+		out[1] = finish(kFreshness, 0,
+				detail::putRaw(layout::kFreshnessHigh, (freshness_ + 1) >> 16));
+		return authenticate(out, 2, 0);
 	}
 
-	/* For the controller side (and tests). */
-	RawFrame encodeCommand(const CommandData &cmd)
+	/* For the controller side (and tests): a keyless command. */
+	RawFrame encodeCommand(const CommandData &cmd) { return commandFrame(cmd); }
+
+	/* A command and, with an authenticator, DP_CommandAuth: its MAC over the
+	 * command and sensor_freshness (Decoder::freshness(): the latest value
+	 * the controller verified). Returns the frames written (1 or 2). */
+	int encodeCommand(const CommandData &cmd, std::uint64_t sensor_freshness, RawFrame *out)
 	{
-		using namespace detail;
-		return finish(kCommand, 0,
-			      flag(cmd.enable, 0) |
-				      field(static_cast<std::uint64_t>(cmd.mode), 1, 1) |
-				      field(static_cast<std::uint64_t>(cmd.strobe), 2, 2) |
-				      field(cmd.exposure_us, 8, 16) |
-				      signedField(toRaw(cmd.gain, kGainRes, 0, 255, 0), 24, 8));
+		out[0] = commandFrame(cmd);
+		if (!mac_)
+			return 1;
+		detail::MacInput input;
+		input.reset(base_id_);
+		input.add(out[0]);
+		std::size_t len = 0;
+		const std::uint8_t *bytes =
+			input.finish(sensor_freshness, nextByte6(kCommandAuth, 0), &len);
+		std::uint32_t mac = 0;
+		mac_failed_ = !mac_->mac32(bytes, len, &mac);
+		out[1] = finish(kCommandAuth, 0,
+				detail::putRaw(layout::kCommandFreshness,
+					       sensor_freshness & 0xffff) |
+					detail::putRaw(layout::kCommandMac, mac));
+		return 2;
 	}
+
+	/*
+	 * Authenticate from now on with mac (nullptr: no more). first_freshness:
+	 * the freshness value before the first DP_Auth; it must never repeat for
+	 * a key, so the sensor starts each run at (a persisted run counter) << 32.
+	 */
+	void setAuthenticator(MacFunction *mac, std::uint64_t first_freshness = 0)
+	{
+		mac_ = mac;
+		freshness_ = first_freshness;
+	}
+	bool authenticating() const { return mac_ != nullptr; }
+	/* The freshness value of the last DP_Auth sent (first_freshness before any). */
+	std::uint64_t freshness() const { return freshness_; }
+	/* The last MAC could not be computed (its frame carries 0: receivers refuse it). */
+	bool macFailed() const { return mac_failed_; }
 
 	std::uint32_t baseId() const { return base_id_; }
 	/* The last encodeReport() was asked for a pose it could not send. */
@@ -549,6 +708,57 @@ public:
 	}
 
 private:
+	RawFrame heartbeatFrame(const HeartbeatData &hb)
+	{
+		using namespace detail;
+		const std::uint64_t uptime = hb.uptime_s > 0xffffffu ? 0xffffffu : hb.uptime_s;
+		return finish(kHeartbeat, 0,
+			      field(uptime, 0, 24) |
+				      field(static_cast<std::uint64_t>(hb.state), 24, 3) |
+				      field(static_cast<std::uint64_t>(hb.mode), 27, 1) |
+				      field(static_cast<std::uint64_t>(hb.strobe), 28, 2) |
+				      flag(hb.enabled, 30) | flag(mac_ != nullptr, 31) |
+				      field(hb.faults, 32, 8) |
+				      signedField(toRaw(hb.frame_rate_hz, kFrameRateRes, 0, 255, 0),
+						  40, 8));
+	}
+
+	RawFrame commandFrame(const CommandData &cmd)
+	{
+		using namespace detail;
+		return finish(kCommand, 0,
+			      flag(cmd.enable, 0) |
+				      field(static_cast<std::uint64_t>(cmd.mode), 1, 1) |
+				      field(static_cast<std::uint64_t>(cmd.strobe), 2, 2) |
+				      field(cmd.exposure_us, 8, 16) |
+				      signedField(toRaw(cmd.gain, kGainRes, 0, 255, 0), 24, 8));
+	}
+
+	/* Append DP_Auth over out[0..n) with the next freshness value; returns n + 1. */
+	int authenticate(RawFrame *out, int n, std::uint8_t seq)
+	{
+		detail::MacInput input;
+		input.reset(base_id_);
+		for (int i = 0; i < n; ++i)
+			input.add(out[i]);
+		++freshness_;
+		std::size_t len = 0;
+		const std::uint8_t *bytes = input.finish(freshness_, nextByte6(kAuth, seq), &len);
+		std::uint32_t mac = 0;
+		mac_failed_ = !mac_->mac32(bytes, len, &mac);
+		out[n] = finish(kAuth, seq,
+				detail::putRaw(layout::kAuthFreshness, freshness_ & 0xffff) |
+					detail::putRaw(layout::kAuthMac, mac_failed_ ? 0 : mac));
+		return n + 1;
+	}
+
+	/* Byte 6 (alive counter, sequence) of the next frame at offset. */
+	std::uint8_t nextByte6(std::uint32_t offset, std::uint8_t seq) const
+	{
+		return static_cast<std::uint8_t>((alive_[detail::slot(offset)] & 0x0f) |
+						 ((seq & 0x0f) << 4));
+	}
+
 	RawFrame finish(std::uint32_t offset, std::uint8_t seq, std::uint64_t payload)
 	{
 		RawFrame f;
@@ -567,6 +777,9 @@ private:
 	std::array<std::uint8_t, detail::kSlots> alive_{};
 	std::uint8_t sequence_ = 0;
 	bool pose_dropped_ = false;
+	MacFunction *mac_ = nullptr;
+	std::uint64_t freshness_ = 0;
+	bool mac_failed_ = false;
 };
 
 enum class FrameError : std::uint8_t {
@@ -575,6 +788,10 @@ enum class FrameError : std::uint8_t {
 	WrongLength,
 	BadCrc,
 	StaleAlive, /* repeated alive counter */
+	BadMac, /* authentication: the MAC does not match */
+	Replayed, /* authentication: a freshness value not newer than the last accepted (or too old) */
+	Unsynced, /* authentication: no DP_Freshness seen yet, the value cannot be rebuilt */
+	Unauthenticated, /* authentication: a MAC frame with nothing to cover, or a group whose MAC never came */
 };
 
 inline const char *frameErrorName(FrameError error)
@@ -590,6 +807,14 @@ inline const char *frameErrorName(FrameError error)
 		return "bad CRC";
 	case FrameError::StaleAlive:
 		return "stale alive counter";
+	case FrameError::BadMac:
+		return "bad MAC";
+	case FrameError::Replayed:
+		return "replayed or outdated freshness value";
+	case FrameError::Unsynced:
+		return "no freshness value yet";
+	case FrameError::Unauthenticated:
+		return "not authenticated";
 	}
 	return "unknown error";
 }
@@ -603,7 +828,7 @@ inline const char *frameErrorName(FrameError error)
  * previous accepted one of its identifier (StaleAlive: repeated or stuck data).
  * An alive counter that jumps by more than 1 is accepted and the skipped
  * counts are added to alive_gaps (frames lost). Identifiers that are not ours
- * (outside base .. base + 0x10, or an unused offset) are normal on a shared
+ * (outside base .. base + 0x11, or an unused offset) are normal on a shared
  * bus: Event::None, lastError() UnknownId, counted in unknown_ids only.
  *
  * Pose frames are held until the status frame of the same sequence arrives;
@@ -631,6 +856,20 @@ inline const char *frameErrorName(FrameError error)
  * be seen this way; the sensor never lets a report wait in its own queue
  * beyond can.max_report_age_us, and the kernel's queue is txqueuelen frames.
  * feed(frame) without an arrival time dates nothing (poseAgeUs() is -1).
+ *
+ * Authentication (setAuthenticator): nothing counts until its MAC has been
+ * checked. The frames the sensor sends since its previous DP_Auth are held;
+ * DP_Auth completes them: its freshness value is rebuilt (from the preceding
+ * DP_Freshness, or from the last accepted value and the 16 bits it carries),
+ * must be newer than the last accepted one, and the MAC over the group and
+ * that value must match; only then is the report (Event::Report) or the
+ * heartbeat (Event::Heartbeat) taken. A group whose DP_Auth never came is
+ * dropped when the next group starts (unauthenticated); a MAC that does not
+ * match, a value not newer (replays) or one that cannot be rebuilt yet
+ * (unsynced: no DP_Freshness since the decoder started, up to one heartbeat
+ * period) is Rejected. The sensor side checks commands the same way, with
+ * DP_CommandAuth: its value must be one of the sensor's own last
+ * setCommandFreshness() window values, and newer than the last command's.
  */
 class Decoder
 {
@@ -655,6 +894,11 @@ public:
 		std::uint64_t stale_frames = 0;
 		std::uint64_t stale_poses = 0; /* complete, but older than maxAgeUs() */
 		std::uint64_t undated_poses = 0; /* complete, but no clock reference yet */
+		std::uint64_t auth_failures = 0; /* MAC mismatch */
+		std::uint64_t replays = 0; /* freshness value not newer, or outside the window */
+		std::uint64_t unsynced = 0; /* MAC frames before any DP_Freshness */
+		std::uint64_t unauthenticated =
+			0; /* groups without their MAC, MACs without a group */
 	};
 
 	/* Reports dated against the least-delayed of this many. */
@@ -667,6 +911,7 @@ public:
 	explicit Decoder(std::uint32_t base_id = kDefaultBaseId)
 		: base_id_(base_id)
 	{
+		group_.reset(base_id_);
 	}
 
 	/* A frame from the bus, undated (no freshness check). */
@@ -685,6 +930,31 @@ public:
 		return take(frame);
 	}
 
+	/* Check MACs from now on (nullptr: accept unauthenticated frames again). */
+	void setAuthenticator(MacFunction *mac)
+	{
+		mac_ = mac;
+		dropGroup();
+		command_held_ = false;
+	}
+	bool authenticating() const { return mac_ != nullptr; }
+	/* Controller side: the newest sensor freshness value accepted (0: none yet). Persist it
+	 * across restarts with restoreFreshness(), so that no recorded traffic is accepted before
+	 * the sensor's next DP_Freshness. */
+	std::uint64_t freshness() const { return last_fv_; }
+	void restoreFreshness(std::uint64_t freshness)
+	{
+		last_fv_ = freshness;
+		synced_ = freshness != 0;
+	}
+	/* Sensor side: commands must answer one of the last `window` freshness values `sensor`
+	 * sent (its own encoder) and be newer than the last command's. */
+	void setCommandFreshness(const Encoder *sensor, std::uint64_t window)
+	{
+		sensor_ = sensor;
+		command_window_ = window;
+	}
+
 	/* Poses older than this at arrival are not valid (feed with arrival_us). */
 	void setMaxAgeUs(std::int64_t max_age_us) { max_age_us_ = max_age_us; }
 	std::int64_t maxAgeUs() const { return max_age_us_; }
@@ -698,8 +968,7 @@ private:
 		++counters_.frames;
 		last_error_ = FrameError::None;
 
-		if (frame.id < base_id_ || frame.id > base_id_ + kCommand ||
-		    (frame.id - base_id_ > kQuality && frame.id - base_id_ != kCommand)) {
+		if (frame.id < base_id_ || !knownOffset(frame.id - base_id_)) {
 			++counters_.unknown_ids;
 			last_error_ = FrameError::UnknownId;
 			return Event::None;
@@ -732,6 +1001,16 @@ private:
 		alive_[s] = alive;
 
 		const std::array<std::uint8_t, 8> &d = frame.data;
+		if (mac_ && offset <= kFreshness && offset != kAuth) {
+			/* A sensor frame after a closed group (its status or heartbeat came) that
+			 * is not the heartbeat's DP_Freshness: that group's MAC was lost. */
+			if (held_ != Held::None &&
+			    !(offset == kFreshness && held_ == Held::Heartbeat))
+				dropGroup();
+			group_.add(frame);
+		}
+		if (!mac_ && (offset == kAuth || offset == kFreshness || offset == kCommandAuth))
+			return Event::None; /* a keyless receiver ignores the MACs */
 		switch (offset) {
 		case kTranslation:
 			takePose(kTranslation, seq);
@@ -774,27 +1053,189 @@ private:
 				static_cast<std::uint32_t>(get(d, layout::kSensorTime));
 			return Event::None;
 		case kStatus:
-			return takeStatus(d, seq);
+			if (!mac_)
+				return completeReport(parseStatus(d), seq);
+			held_ = Held::Report;
+			held_status_ = parseStatus(d);
+			held_seq_ = seq;
+			return Event::None;
 		case kHeartbeat:
-			if (static_cast<std::uint32_t>(bits(d, 0, 24)) < heartbeat_.uptime_s)
-				resetClock(); /* the sensor restarted: its clock did too */
-			heartbeat_.uptime_s = static_cast<std::uint32_t>(bits(d, 0, 24));
-			heartbeat_.state = static_cast<SensorState>(bits(d, 24, 3));
-			heartbeat_.mode = static_cast<TrackMode>(bits(d, 27, 1));
-			heartbeat_.strobe = static_cast<StrobeMode>(bits(d, 28, 2));
-			heartbeat_.enabled = bits(d, 30, 1) != 0;
-			heartbeat_.faults = static_cast<std::uint8_t>(bits(d, 32, 8));
-			heartbeat_.frame_rate_hz =
-				static_cast<double>(bits(d, 40, 8)) * kFrameRateRes;
-			return Event::Heartbeat;
-		default: /* kCommand */
-			command_.enable = bits(d, 0, 1) != 0;
-			command_.mode = static_cast<TrackMode>(bits(d, 1, 1));
-			command_.strobe = static_cast<StrobeMode>(bits(d, 2, 2));
-			command_.exposure_us = static_cast<std::uint16_t>(bits(d, 8, 16));
-			command_.gain = static_cast<double>(bits(d, 24, 8)) * kGainRes;
-			return Event::Command;
+			if (!mac_)
+				return commitHeartbeat(parseHeartbeat(d));
+			held_ = Held::Heartbeat;
+			held_heartbeat_ = parseHeartbeat(d);
+			have_high_ = false;
+			return Event::None;
+		case kFreshness:
+			if (held_ == Held::Heartbeat) {
+				held_high_ = getRaw(d, layout::kFreshnessHigh);
+				have_high_ = true;
+			}
+			return Event::None;
+		case kAuth:
+			return verifyGroup(d);
+		case kCommand:
+			if (!mac_) {
+				command_ = parseCommand(d);
+				return Event::Command;
+			}
+			if (command_held_)
+				++counters_.unauthenticated;
+			command_held_ = true;
+			held_command_ = parseCommand(d);
+			command_frame_ = frame;
+			return Event::None;
+		default: /* kCommandAuth */
+			return verifyCommand(d);
 		}
+	}
+
+	static StatusData parseStatus(const std::array<std::uint8_t, 8> &d)
+	{
+		using namespace detail;
+		StatusData st;
+		st.state = static_cast<SensorState>(bits(d, 0, 3));
+		st.enabled = bits(d, 3, 1) != 0;
+		st.pose_valid = bits(d, 4, 1) != 0;
+		st.tracked = bits(d, 5, 1) != 0;
+		st.strobe = static_cast<StrobeMode>(bits(d, 6, 2));
+		st.leds_used = static_cast<int>(bits(d, 8, 8));
+		st.rms_px = static_cast<double>(bits(d, 16, 8)) * kRmsRes;
+		st.faults = static_cast<std::uint8_t>(bits(d, 24, 8));
+		st.latency_ms = static_cast<double>(bits(d, 32, 16)) * kLatencyRes;
+		return st;
+	}
+
+	static HeartbeatData parseHeartbeat(const std::array<std::uint8_t, 8> &d)
+	{
+		using namespace detail;
+		HeartbeatData hb;
+		hb.uptime_s = static_cast<std::uint32_t>(bits(d, 0, 24));
+		hb.state = static_cast<SensorState>(bits(d, 24, 3));
+		hb.mode = static_cast<TrackMode>(bits(d, 27, 1));
+		hb.strobe = static_cast<StrobeMode>(bits(d, 28, 2));
+		hb.enabled = bits(d, 30, 1) != 0;
+		hb.authenticated = getRaw(d, layout::kAuthenticated) != 0;
+		hb.faults = static_cast<std::uint8_t>(bits(d, 32, 8));
+		hb.frame_rate_hz = static_cast<double>(bits(d, 40, 8)) * kFrameRateRes;
+		return hb;
+	}
+
+	static CommandData parseCommand(const std::array<std::uint8_t, 8> &d)
+	{
+		using namespace detail;
+		CommandData cmd;
+		cmd.enable = bits(d, 0, 1) != 0;
+		cmd.mode = static_cast<TrackMode>(bits(d, 1, 1));
+		cmd.strobe = static_cast<StrobeMode>(bits(d, 2, 2));
+		cmd.exposure_us = static_cast<std::uint16_t>(bits(d, 8, 16));
+		cmd.gain = static_cast<double>(bits(d, 24, 8)) * kGainRes;
+		return cmd;
+	}
+
+	Event commitHeartbeat(const HeartbeatData &hb)
+	{
+		if (hb.uptime_s < heartbeat_.uptime_s)
+			resetClock(); /* the sensor restarted: its clock did too */
+		heartbeat_ = hb;
+		return Event::Heartbeat;
+	}
+
+	Event reject(FrameError error, std::uint64_t *counter)
+	{
+		++*counter;
+		last_error_ = error;
+		return Event::Rejected;
+	}
+
+	/* The MAC's truncated value over `input`, `freshness` and the MAC frame's byte 6 is
+	 * the MAC frame's. */
+	bool macMatches(detail::MacInput &input, std::uint64_t freshness,
+			const std::array<std::uint8_t, 8> &mac_frame,
+			const SignalLayout &mac_signal)
+	{
+		const std::uint64_t mac = detail::getRaw(mac_frame, mac_signal);
+		std::size_t len = 0;
+		const std::uint8_t *bytes = input.finish(freshness, mac_frame[6], &len);
+		std::uint32_t expected = 0;
+		return mac_->mac32(bytes, len, &expected) && expected == mac;
+	}
+
+	/* DP_Auth: check the held group and take it. */
+	Event verifyGroup(const std::array<std::uint8_t, 8> &d)
+	{
+		using namespace detail;
+		const Held held = held_;
+		const bool overflow = group_.overflow();
+		const bool have_high = have_high_;
+		const std::uint64_t high = held_high_;
+		held_ = Held::None;
+		have_high_ = false;
+		/* The group is checked as it is now; the next one starts empty. */
+		detail::MacInput input = group_;
+		group_.reset(base_id_);
+		if (held == Held::None || overflow)
+			return reject(FrameError::Unauthenticated, &counters_.unauthenticated);
+
+		const std::uint64_t low = getRaw(d, layout::kAuthFreshness);
+		std::uint64_t fv;
+		if (have_high) {
+			fv = (high << 16) | low;
+		} else if (synced_) {
+			fv = (last_fv_ & ~std::uint64_t{ 0xffff }) | low;
+			if (fv <= last_fv_)
+				fv += 0x10000;
+		} else {
+			return reject(FrameError::Unsynced, &counters_.unsynced);
+		}
+		if (synced_ && fv <= last_fv_)
+			return reject(FrameError::Replayed, &counters_.replays);
+		if (!macMatches(input, fv, d, layout::kAuthMac))
+			return reject(FrameError::BadMac, &counters_.auth_failures);
+		last_fv_ = fv;
+		synced_ = true;
+		if (held == Held::Report)
+			return completeReport(held_status_, held_seq_);
+		return commitHeartbeat(held_heartbeat_);
+	}
+
+	/* DP_CommandAuth: check the held command against the sensor's own freshness. */
+	Event verifyCommand(const std::array<std::uint8_t, 8> &d)
+	{
+		using namespace detail;
+		const bool held = command_held_;
+		command_held_ = false;
+		if (!held || !sensor_)
+			return reject(FrameError::Unauthenticated, &counters_.unauthenticated);
+		const std::uint64_t current = sensor_->freshness();
+		const std::uint64_t low = getRaw(d, layout::kCommandFreshness);
+		std::uint64_t echo = (current & ~std::uint64_t{ 0xffff }) | low;
+		if (echo > current) {
+			if (echo < 0x10000)
+				return reject(FrameError::Replayed, &counters_.replays);
+			echo -= 0x10000;
+		}
+		if (current - echo >= command_window_ ||
+		    (command_synced_ && echo <= last_command_fv_))
+			return reject(FrameError::Replayed, &counters_.replays);
+		detail::MacInput input;
+		input.reset(base_id_);
+		input.add(command_frame_);
+		if (!macMatches(input, echo, d, layout::kCommandMac))
+			return reject(FrameError::BadMac, &counters_.auth_failures);
+		last_command_fv_ = echo;
+		command_synced_ = true;
+		command_ = held_command_;
+		return Event::Command;
+	}
+
+	void dropGroup()
+	{
+		if (held_ != Held::None)
+			++counters_.unauthenticated;
+		held_ = Held::None;
+		have_high_ = false;
+		group_.reset(base_id_);
 	}
 
 public:
@@ -824,18 +1265,11 @@ private:
 		pending_mask_ = static_cast<std::uint8_t>(pending_mask_ | (1u << offset));
 	}
 
-	Event takeStatus(const std::array<std::uint8_t, 8> &d, std::uint8_t seq)
+	/* A status (verified, with authentication) completes the report of its sequence. */
+	Event completeReport(const StatusData &status, std::uint8_t seq)
 	{
 		using namespace detail;
-		status_.state = static_cast<SensorState>(bits(d, 0, 3));
-		status_.enabled = bits(d, 3, 1) != 0;
-		status_.pose_valid = bits(d, 4, 1) != 0;
-		status_.tracked = bits(d, 5, 1) != 0;
-		status_.strobe = static_cast<StrobeMode>(bits(d, 6, 2));
-		status_.leds_used = static_cast<int>(bits(d, 8, 8));
-		status_.rms_px = static_cast<double>(bits(d, 16, 8)) * kRmsRes;
-		status_.faults = static_cast<std::uint8_t>(bits(d, 24, 8));
-		status_.latency_ms = static_cast<double>(bits(d, 32, 16)) * kLatencyRes;
+		status_ = status;
 		sequence_ = seq;
 
 		const bool complete = pending_mask_ == kPoseFrameMask && pending_seq_ == seq;
@@ -896,8 +1330,32 @@ private:
 	std::uint32_t base_id_;
 	std::array<std::uint8_t, detail::kSlots> alive_{};
 	std::array<bool, detail::kSlots> alive_seen_{};
+	enum class Held : std::uint8_t {
+		None,
+		Report,
+		Heartbeat
+	};
+
 	bool timed_ = false;
 	std::int64_t arrival_us_ = 0;
+	/* Authentication. */
+	MacFunction *mac_ = nullptr;
+	detail::MacInput group_;
+	Held held_ = Held::None;
+	StatusData held_status_;
+	std::uint8_t held_seq_ = 0;
+	HeartbeatData held_heartbeat_;
+	bool have_high_ = false;
+	std::uint64_t held_high_ = 0;
+	std::uint64_t last_fv_ = 0;
+	bool synced_ = false;
+	const Encoder *sensor_ = nullptr;
+	std::uint64_t command_window_ = 0;
+	bool command_held_ = false;
+	CommandData held_command_;
+	RawFrame command_frame_;
+	std::uint64_t last_command_fv_ = 0;
+	bool command_synced_ = false;
 	std::int64_t max_age_us_ = kDefaultMaxAgeUs;
 	std::int64_t pose_age_us_ = -1;
 	std::array<std::int64_t, kClockSamples> clock_{};

@@ -698,8 +698,8 @@ TEST_F(CanRejection, PoseFramesOfAnotherSequenceDoNotComplete)
 
 TEST_F(CanRejection, OtherIdsAreNotOurs)
 {
-	for (std::uint32_t id : { kDefaultBaseId - 1, kDefaultBaseId + 8, kDefaultBaseId + 0xf,
-				  kDefaultBaseId + 0x11, 0x7ffu, 0u }) {
+	for (std::uint32_t id : { kDefaultBaseId - 1, kDefaultBaseId + 0xa, kDefaultBaseId + 0xf,
+				  kDefaultBaseId + 0x12, 0x7ffu, 0u }) {
 		RawFrame f = frames_[0];
 		f.id = id;
 		f.data[7] = frameCrc(id, f.data);
@@ -728,6 +728,11 @@ TEST(CanProtocol, BusLoad)
 	EXPECT_NEAR(load, 0.1161, 1e-4);
 	/* The same traffic on a 125 kbit/s bus is over the 30 % budget. */
 	EXPECT_GT(worstCaseBusLoad(60, 10, 125000), 0.30);
+	/* Authenticated: a DP_Auth per report, DP_Freshness and DP_Auth per heartbeat. */
+	const double auth = worstCaseBusLoad(60, 10, 500000, 0.0, true);
+	EXPECT_NEAR(auth, (8 * 60 + 3 * 10) * 135.0 / 500000.0, 1e-12);
+	EXPECT_NEAR(auth, 0.1377, 1e-4);
+	EXPECT_LE(worstCaseBusLoad(60, 10, 250000, 0.0, true), 0.30);
 }
 
 /* ---- Freshness: the decoder dates reports (feed with an arrival time) ---- */
@@ -1264,8 +1269,16 @@ TEST(CanProtocol, SignalLayoutsAreTheDbcs)
 		const char *name;
 		const SignalLayout &layout;
 	};
-	const Named layouts[] = { { "Log10Nfa", layout::kLog10Nfa },
-				  { "SensorTimeUs", layout::kSensorTime } };
+	const Named layouts[] = {
+		{ "Log10Nfa", layout::kLog10Nfa },
+		{ "SensorTimeUs", layout::kSensorTime },
+		{ "Authenticated", layout::kAuthenticated },
+		{ "AuthFreshness", layout::kAuthFreshness },
+		{ "AuthMac", layout::kAuthMac },
+		{ "FreshnessHigh", layout::kFreshnessHigh },
+		{ "CmdFreshness", layout::kCommandFreshness },
+		{ "CmdMac", layout::kCommandMac },
+	};
 	for (const Named &n : layouts) {
 		SCOPED_TRACE(n.name);
 		/* The message that holds the signal: the last BO_ before its SG_ line. */

@@ -306,7 +306,7 @@ const BadFile kBadFiles[] = {
 	{ "base_id_no_room",
 	  R"({ "can": { "base_id": "0x7f8" } })",
 	  nullptr,
-	  { "can.base_id: 0x7f8 leaves no room for offsets up to 0x10 in 11 bits (max 0x7ef)" } },
+	  { "can.base_id: 0x7f8 leaves no room for offsets up to 0x11 in 11 bits (max 0x7ee)" } },
 	{ "base_id_not_11_bit",
 	  R"({ "can": { "base_id": 4096 } })",
 	  nullptr,
@@ -474,7 +474,7 @@ const BadFile kBadFiles[] = {
 	  nullptr,
 	  { "camera.exposure_us: 0 is out of range [10, 1000000]",
 	    "strobe.mode: \"blink\" is not one of off, constant, alternate",
-	    "can.base_id: 0x7f8 leaves no room for offsets up to 0x10 in 11 bits (max 0x7ef)",
+	    "can.base_id: 0x7f8 leaves no room for offsets up to 0x11 in 11 bits (max 0x7ee)",
 	    "can.heartbeat_hz: 0 is out of range [1, 100]",
 	    "unknown key \"pipelin\" at top level (did you mean \"pipeline\"?)" } },
 };
@@ -688,10 +688,10 @@ TEST_F(ConfigTest, BaseIdForms)
 	}
 	/* The highest base that leaves room for the offsets. */
 	json doc = baseConfig();
-	doc["can"]["base_id"] = "0x7ef";
+	doc["can"]["base_id"] = "0x7ee";
 	const ConfigResult r = loadText(doc.dump());
 	ASSERT_TRUE(r.ok()) << joinErrors(r.errors);
-	EXPECT_EQ(r.config.can.base_id, 0x7efu);
+	EXPECT_EQ(r.config.can.base_id, 0x7eeu);
 }
 
 TEST_F(ConfigTest, RelativePathsResolveAgainstTheFile)

@@ -8,11 +8,15 @@
  * No timing assertions on the machine's speed: rates are compared with the
  * camera's own frame count, and poses with the trajectory's truth.
  */
+#include <sys/stat.h>
+
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <thread>
 #include <vector>
@@ -24,6 +28,7 @@
 #include "firmware/config.h"
 #include "firmware/daemon.h"
 #include "firmware/protocol/dockpose_can.h"
+#include "firmware/protocol/dockpose_can_cmac.h"
 #include "hal/clock.h"
 #include "hal/sim/loopback_can_bus.h"
 #include "hal/sim/recording_strobe.h"
@@ -152,6 +157,18 @@ public:
 	{
 		return waitFor([this] { return !reports_.empty() && reports_.back().pose_valid; },
 			       timeout);
+	}
+
+	void sendFrames(const can::RawFrame *frames, int n)
+	{
+		for (int k = 0; k < n; ++k) {
+			hal::CanFrame f;
+			f.id = frames[k].id;
+			f.len = frames[k].len;
+			std::copy_n(frames[k].data.begin(), 8, f.data.begin());
+			controller_->send(f);
+		}
+		controller_->poll();
 	}
 
 	void sendCommand(const can::CommandData &command)
@@ -568,6 +585,78 @@ TEST(Daemon, AfterAOneSecondBusStallNoStaleReportReachesTheBus)
 	EXPECT_GT(after_stall, 10);
 	EXPECT_GT(dated.counters().valid_poses, 10u);
 	EXPECT_EQ(dated.counters().stale_poses, 0u);
+}
+
+/* With can.key_file the daemon signs what it sends and takes only signed commands: a keyed
+ * controller gets its poses and heartbeats, its command is applied, and a forged command (another
+ * key) and a bare one are refused. */
+TEST(Daemon, WithAKeyReportsAreSignedAndOnlySignedCommandsAreTaken)
+{
+	char dir[] = "/tmp/dockpose-daemon-key.XXXXXX";
+	ASSERT_NE(::mkdtemp(dir), nullptr);
+	const std::string key_path = std::string(dir) + "/can.key";
+	std::ofstream(key_path) << "000102030405060708090a0b0c0d0e0f\n";
+	::chmod(key_path.c_str(), 0600);
+
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	config.can.key_file = key_path;
+	config.can.run_counter_file = std::string(dir) + "/run";
+	std::array<std::uint8_t, can::kKeyBytes> key{};
+	for (std::size_t i = 0; i < key.size(); ++i)
+		key[i] = static_cast<std::uint8_t>(i);
+	can::OpensslCmac controller_mac;
+	ASSERT_TRUE(controller_mac.setKey(key));
+
+	Rig rig(config);
+	rig.decoder_.setAuthenticator(&controller_mac);
+	rig.command_encoder_.setAuthenticator(&controller_mac);
+	rig.start();
+	ASSERT_TRUE(rig.waitForValidPose(10s)) << "no authenticated pose";
+	ASSERT_FALSE(rig.heartbeats_.empty());
+	EXPECT_TRUE(rig.heartbeats_.back().authenticated);
+	EXPECT_EQ(rig.decoder_.freshness() >> 32, 1u) << "run 1";
+
+	/* A signed command: search-only mode. */
+	can::CommandData cmd;
+	cmd.mode = can::TrackMode::SearchOnly;
+	can::RawFrame out[can::kMaxCommandFrames];
+	ASSERT_EQ(rig.command_encoder_.encodeCommand(cmd, rig.decoder_.freshness(), out), 2);
+	rig.sendFrames(out, 2);
+	EXPECT_TRUE(rig.waitFor(
+		[&] {
+			return !rig.heartbeats_.empty() &&
+			       rig.heartbeats_.back().mode == can::TrackMode::SearchOnly;
+		},
+		3s))
+		<< "the signed command was not applied";
+
+	/* Forged (another key) and bare: refused, and the mode stays. */
+	can::OpensslCmac forger_mac;
+	ASSERT_TRUE(forger_mac.setKey({}));
+	can::Encoder forger(can::kDefaultBaseId);
+	forger.setAuthenticator(&forger_mac);
+	for (int i = 0; i < 3; ++i) /* its alive counters apart from the controller's */
+		(void)forger.encodeCommand(cmd, 0, out);
+	can::CommandData track;
+	track.mode = can::TrackMode::Track;
+	rig.drain();
+	ASSERT_EQ(forger.encodeCommand(track, rig.decoder_.freshness(), out), 2);
+	rig.sendFrames(out, 2);
+	const can::RawFrame bare = can::Encoder(can::kDefaultBaseId).encodeCommand(track);
+	rig.sendFrames(&bare, 1);
+	EXPECT_TRUE(rig.waitFor([&] { return rig.daemon_->stats().commands_rejected >= 1; }, 3s));
+	std::this_thread::sleep_for(300ms);
+	rig.drain();
+	EXPECT_EQ(rig.heartbeats_.back().mode, can::TrackMode::SearchOnly);
+	rig.stop();
+	EXPECT_EQ(rig.decoder_.counters().auth_failures, 0u);
+	EXPECT_GT(rig.decoder_.counters().valid_poses, 10u);
+	std::ifstream run_file(config.can.run_counter_file);
+	std::string run;
+	std::getline(run_file, run);
+	EXPECT_EQ(run, "1");
+	std::filesystem::remove_all(dir);
 }
 
 } /* namespace */
