@@ -64,9 +64,32 @@ Status CameraIntrinsics::checkPlausible() const
 		    << " scales the image corners by " << corner_factor
 		    << "; a lens's stays within [" << 1.0 / kMaxCornerDistortion << ", "
 		    << kMaxCornerDistortion << "]";
+	else if (const double fold = radialFold(std::sqrt(r2_max)); fold > 0.0)
+		err << "camera distortion k1=" << k1 << " k2=" << k2
+		    << " folds the image: its radial mapping stops growing at radius " << fold
+		    << " (normalised), inside the image corner's " << std::sqrt(r2_max)
+		    << ", so points near the edge would have two undistorted positions";
 	else
 		return Status::ok();
 	return Status::error(err.str());
+}
+
+double CameraIntrinsics::radialFold(double r_distorted_max) const
+{
+	/* r_d(r) = r (1 + k1 r^2 + k2 r^4); its slope 1 + 3 k1 r^2 + 5 k2 r^4 must stay positive
+	 * (by a margin: a slope near 0 amplifies noise without bound) until r_d reaches the
+	 * corner. Steps of 1/1000 of the corner's radius; a mapping that has not reached the
+	 * corner at 4x its radius compresses it more than kMaxCornerDistortion allows anyway. */
+	constexpr double kMinSlope = 0.05;
+	const double step = r_distorted_max / 1000.0;
+	for (double r = 0.0; r <= 4.0 * r_distorted_max; r += step) {
+		const double r2 = r * r;
+		if (r * (1.0 + k1 * r2 + k2 * r2 * r2) >= r_distorted_max)
+			return 0.0;
+		if (1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2 < kMinSlope)
+			return r;
+	}
+	return 4.0 * r_distorted_max;
 }
 
 CameraModel::CameraModel(const CameraIntrinsics &intrinsics)

@@ -42,7 +42,9 @@ struct CameraIntrinsics {
 	 * unit mix-up, and would give wrong poses): the field of view across each side, the
 	 * pixel aspect fy/fx, and the radial factor 1 + k1 r^2 + k2 r^4 at the image corner
 	 * farthest from the principal point (r from the distorted corner, an approximation
-	 * that is exact without distortion).
+	 * that is exact without distortion), and a radial mapping that keeps growing out to
+	 * that corner (a distortion that folds the image back gives two undistorted positions
+	 * for one pixel near the edge).
 	 */
 	static constexpr double kMinFieldOfViewDeg = 0.5;
 	static constexpr double kMaxFieldOfViewDeg = 175.0;
@@ -55,6 +57,9 @@ struct CameraIntrinsics {
 private:
 	/* validate()'s plausibility bounds, once each value is in its own range. */
 	Status checkPlausible() const;
+	/* The ideal radius where r (1 + k1 r^2 + k2 r^4) stops growing before it reaches
+	 * r_distorted_max (normalised), or 0 when it grows all the way. */
+	double radialFold(double r_distorted_max) const;
 };
 
 class CameraModel

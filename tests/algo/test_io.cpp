@@ -290,6 +290,11 @@ TEST(ModelJson, BadCamerasGiveTheirOwnError)
 		{ "k1 9.99",
 		  R"({"width": 640, "height": 480, "fx": 560, "fy": 560, "cx": 320, "cy": 240, "k1": 9.99})",
 		  "scales the image corners by 6.0" },
+		/* Corner at r = 1; r (1 - 0.5 r^2) peaks at r = 0.82 (r_d 0.54): corner factor 0.5
+		 * passes, but the edge of the image folds back. */
+		{ "folding barrel k1 -0.5",
+		  R"({"width": 1000, "height": 1000, "fx": 707.1068, "fy": 707.1068, "cx": 500, "cy": 500, "k1": -0.5})",
+		  "folds the image: its radial mapping stops growing at radius 0.7" },
 		{ "far principal point",
 		  R"({"width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 3200, "cy": 240})",
 		  "principal point" },
