@@ -4,8 +4,9 @@
  * dockposed receives them (firmware/daemon.cpp, Daemon::handleCommands and
  * applyCommand), from a hostile bus.
  *
- * Each frame is a hal::CanFrame of any shape (standard or extended id, FD or
- * classic, 0..64 bytes); it reaches the daemon only when it passes the
+ * Each frame is a hal::CanFrame of any shape a bus can deliver (standard or
+ * extended id, FD or classic, 0..64 bytes: what hal::canFrameProblem()
+ * accepts); it reaches the daemon only when it passes the
  * daemon's one receive filter (base id + kCommand, mask 0x7ff, standard
  * frames: hal::canFilterPasses, the kernel's CAN_RAW rule that every backend
  * applies), is copied into a can::RawFrame as handleCommands copies it (id,
@@ -65,6 +66,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t *data, std::size_t size
 			frame.data[7] = can::frameCrc(sealed.id, sealed.data);
 		}
 
+		/* No bus delivers a frame canFrameProblem() refuses (an id wider than its format,
+		 * a classic frame over 8 bytes): the backends' one validator. */
+		if (hal::canFrameProblem(frame, true) != nullptr)
+			continue;
 		if (!hal::canFilterPasses(std::span<const hal::CanFilter>(&commands, 1), frame))
 			continue;
 		FUZZ_CHECK(!frame.extended && frame.id == base_id + can::kCommand,
