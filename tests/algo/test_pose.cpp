@@ -7,6 +7,7 @@
  */
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <vector>
@@ -606,7 +607,7 @@ double sse(const Scene &s, const Pose &pose, const Eigen::Vector2d *px)
 	for (int i = 0; i < s.n; ++i) {
 		Eigen::Vector2d uv;
 		if (!s.camera.project(pose.apply(s.model[i]), &uv))
-			return INFINITY;
+			return std::numeric_limits<double>::infinity();
 		sum += (uv - px[i]).squaredNorm();
 	}
 	return sum;
