@@ -129,11 +129,8 @@ TEST_F(Dockposed, SigtermShutsDownCleanlyWithALastStatusFrame)
 	EXPECT_EQ(reports.back().at("state").get<std::string>(), "SHUTDOWN");
 }
 
-/*
- * dockposed on the sim board, sent each of `signals` once it runs (its CAN log has frames),
- * then 1 s to react. Still running then: alive is set and it gets SIGTERM. The status is
- * 128 + N when a signal N ended it.
- */
+/* What a run sent signals did: its status (128 + N when signal N ended it), its stderr, and
+ * whether it was still running a second after the last signal. */
 struct SignalRun {
 	RunResult result;
 	bool alive = false;
@@ -141,6 +138,8 @@ struct SignalRun {
 
 TEST_F(Dockposed, EverySignalThatEndsAProcessIsHandledOrIgnored)
 {
+	/* dockposed on the sim board, sent each of `signals` once it runs (its CAN log has
+	 * frames), then 1 s to react; still running then, it gets SIGTERM. */
 	auto runAndSignal = [&](const std::vector<int> &signals) {
 		const std::string log = dir_ + "/can.log";
 		const std::string alive = dir_ + "/alive";

@@ -56,7 +56,7 @@ can::RawFrame readFrame(FuzzInput &in, std::uint32_t base_id)
 {
 	can::RawFrame f;
 	const std::uint8_t ctrl = in.u8();
-	f.id = (ctrl & 0x01) ? base_id + in.u8() % (can::kCommand + 1) : in.u16();
+	f.id = (ctrl & 0x01) ? base_id + in.u8() % (can::kCommandAuth + 1) : in.u16();
 	f.len = (ctrl & 0x02) ? in.u8() : can::kFrameLength;
 	for (std::uint8_t &b : f.data)
 		b = in.u8();
@@ -93,9 +93,10 @@ public:
 	{
 		using Event = can::Decoder::Event;
 		Verdict v;
-		const bool ours =
-			f.id >= base_id_ && f.id <= base_id_ + can::kCommand &&
-			(f.id - base_id_ <= can::kQuality || f.id - base_id_ == can::kCommand);
+		/* Protocol 3: offsets 0x0..0x9 (0x8, 0x9: authentication), the command's 0x10, 0x11. */
+		const std::uint32_t o = f.id - base_id_;
+		const bool ours = f.id >= base_id_ &&
+				  (o <= can::kFreshness || o == can::kCommand || o == can::kCommandAuth);
 		if (!ours) {
 			v.error = can::FrameError::UnknownId;
 			return v;
@@ -110,7 +111,8 @@ public:
 			v.error = Protocol::kIntegrityError;
 			return v;
 		}
-		const std::size_t slot = v.offset == can::kCommand ? 8 : v.offset;
+		const std::size_t slot = v.offset >= can::kCommand ? v.offset - can::kCommand + 10
+								   : v.offset;
 		const unsigned int alive = f.data[6] & 0x0fu;
 		if (seen_[slot]) {
 			if (alive == alive_[slot]) {
@@ -132,7 +134,7 @@ public:
 		case can::kCommand:
 			v.event = Event::Command;
 			break;
-		default:
+		default: /* pose frames; and the MAC frames, which a keyless receiver only counts */
 			v.event = Event::None;
 			break;
 		}
@@ -141,8 +143,8 @@ public:
 
 private:
 	std::uint32_t base_id_;
-	std::array<bool, 9> seen_{};
-	std::array<std::uint8_t, 9> alive_{};
+	std::array<bool, 12> seen_{};
+	std::array<std::uint8_t, 12> alive_{};
 };
 
 /* Bytes 0..5 (the signals) of two frames agree outside the bits in `unused`. */
@@ -156,12 +158,11 @@ inline bool samePayload(const can::RawFrame &a, const can::RawFrame &b, std::uin
 	return ((wa ^ wb) & ~unused) == 0;
 }
 
-/* Bits no signal uses (docs/can-protocol.md): heartbeat bit 31; command bits 4..7, 32..47;
- * quality bits 16..47. */
+/* Bits no signal uses (docs/can-protocol.md): command bits 4..7, 32..47. The heartbeat's bit 31
+ * (Authenticated) is the encoder's own state, not a decoded value: left out too. */
 constexpr std::uint64_t kHeartbeatUnused = std::uint64_t{ 1 } << 31;
 constexpr std::uint64_t kCommandUnused = (std::uint64_t{ 0xf } << 4) |
 					 (std::uint64_t{ 0xffff } << 32);
-constexpr std::uint64_t kQualityUnused = std::uint64_t{ 0xffffffff } << 16;
 
 /*
  * The controller's side: Protocol's decoder fed a sequence of frames.
@@ -211,7 +212,7 @@ void runController(FuzzInput &in)
 		case can::FrameError::StaleAlive:
 			++expected.stale_frames;
 			break;
-		case can::FrameError::None:
+		default: /* None; the authentication errors are a keyed decoder's */
 			break;
 		}
 		expected.alive_gaps += v.alive_gap;
@@ -267,9 +268,7 @@ void runController(FuzzInput &in)
 					const std::uint32_t o = offsets[i];
 					FUZZ_CHECK(out[i].id == held[o].id,
 						   "pose frames in the DBC's order");
-					FUZZ_CHECK(samePayload(out[i], held[o],
-							       o == can::kQuality ? kQualityUnused
-										  : 0),
+					FUZZ_CHECK(samePayload(out[i], held[o]),
 						   "the pose decodes losslessly");
 				}
 			}
