@@ -32,7 +32,8 @@
 #include "tools/dockpose/json_line.h"
 
 /* The counting hooks interpose malloc, which the sanitizers' allocator does not allow. */
-#if !defined(__SANITIZE_ADDRESS__)
+#include "../common/sanitizer.h"
+#if !DOCKPOSE_SANITIZED
 #define DOCKPOSE_COUNT_ALLOCATIONS 1
 #include "../common/counting_allocator.h"
 #endif

@@ -26,9 +26,10 @@
 
 /*
  * Allocation counting for the no-allocation test (tests/common/counting_allocator.h),
- * not under AddressSanitizer, which owns operator new and malloc.
+ * not under a sanitizer, which owns operator new and malloc (tests/common/sanitizer.h).
  */
-#if defined(__SANITIZE_ADDRESS__)
+#include "../common/sanitizer.h"
+#if DOCKPOSE_SANITIZED
 #define DOCKPOSE_COUNTS_ALLOCATIONS 0
 namespace dockpose::test {
 inline std::atomic<long> g_allocations{ 0 };
