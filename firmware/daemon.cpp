@@ -234,13 +234,29 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 		logCanLink();
 		notifier_.watchdog(now_ns);
 		updateSystemdStatus(now_ns);
+		if (now_ns - last_publish_ns_ >= 50 * kNsPerMs)
+			publishStats(now_ns);
 	}
 
 	if (camera_failed_ && stalled_)
 		exit_status = 1;
 	stats_.run_s = static_cast<double>(hal::monotonicNs() - start_ns_) * 1e-9;
 	shutdown();
+	publishStats(hal::monotonicNs());
 	return exit_status;
+}
+
+DaemonStats Daemon::stats() const
+{
+	std::lock_guard<std::mutex> lock(stats_mutex_);
+	return published_stats_;
+}
+
+void Daemon::publishStats(std::int64_t now_ns)
+{
+	last_publish_ns_ = now_ns;
+	std::lock_guard<std::mutex> lock(stats_mutex_);
+	published_stats_ = stats_;
 }
 
 void Daemon::shutdown()

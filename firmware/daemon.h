@@ -29,6 +29,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <memory>
+#include <mutex>
 #include <optional>
 
 #include "algo/image.h"
@@ -91,7 +92,9 @@ public:
 	void shutdown();
 
 	SensorState state() const { return state_machine_.state(); }
-	const DaemonStats &stats() const { return stats_; }
+	/* The counts as the frame loop last published them (every 50 ms while it runs, and when
+	 * run() returns): a copy, safe from any thread. Allocates: never. */
+	DaemonStats stats() const;
 	StrobeMode strobeMode() const { return strobe_mode_; }
 	bool enabled() const { return enabled_; }
 	hal::Strobe *strobe() const { return backends_.strobe.get(); }
@@ -123,6 +126,7 @@ private:
 	std::uint8_t activeFaults(std::int64_t now_ns);
 	void logState(SensorState before, SensorState after, std::uint64_t sequence);
 	void updateSystemdStatus(std::int64_t now_ns);
+	void publishStats(std::int64_t now_ns);
 	/* The CAN link going down (interface missing or down) or up: one log line each way. */
 	void logCanLink();
 
@@ -138,7 +142,10 @@ private:
 	std::int64_t last_reject_log_ns_ = 0;
 	std::uint64_t rejects_unlogged_ = 0;
 	SystemdNotifier notifier_;
-	DaemonStats stats_;
+	DaemonStats stats_; /* frame thread */
+	mutable std::mutex stats_mutex_; /* guards published_stats_ */
+	DaemonStats published_stats_;
+	std::int64_t last_publish_ns_ = 0;
 
 	/* Settings the arm controller can change. */
 	bool enabled_ = true;
