@@ -437,16 +437,17 @@ void Soak::onReport(std::int64_t arrival_ns)
 	if (!decoder_.poseValid()) {
 		/* A complete report the decoder refused as too old: what made it old. */
 		if (status.pose_valid && decoder_.poseAgeUs() > decoder_.maxAgeUs()) {
-			++stale_refused_;
 			max_stale_latency_ms_ = std::max(max_stale_latency_ms_, status.latency_ms);
-			std::printf(
-				"soak: at %.1f s the decoder refused a stale pose: age %.2f ms, "
-				"latency (exposure to send) %.2f ms, wait on the way %.2f ms, "
-				"faults 0x%02x, %s\n",
-				seconds(arrival_ns - t0_ns_),
-				static_cast<double>(decoder_.poseAgeUs()) * 1e-3, status.latency_ms,
-				static_cast<double>(last_quality_wait_us_) * 1e-3, status.faults,
-				phase());
+			if (++stale_refused_ <= 10)
+				std::printf(
+					"soak: at %.1f s the decoder refused a stale pose: age %.2f ms, "
+					"latency (exposure to send) %.2f ms, wait on the way %.2f ms, "
+					"faults 0x%02x, %s\n",
+					seconds(arrival_ns - t0_ns_),
+					static_cast<double>(decoder_.poseAgeUs()) * 1e-3,
+					status.latency_ms,
+					static_cast<double>(last_quality_wait_us_) * 1e-3,
+					status.faults, phase());
 			std::fflush(stdout);
 		}
 		return;
@@ -827,7 +828,7 @@ int Soak::run()
 
 	const std::int64_t end_ns = t0_ns_ + static_cast<std::int64_t>(options_.duration_s * 1e9);
 	std::int64_t longest_cycle_ns = 0;
-	while (failures_ < 20) {
+	for (;;) {
 		const std::int64_t start_ns = hal::monotonicNs();
 		if (cycles_ > 0 && start_ns + longest_cycle_ns > end_ns)
 			break;
