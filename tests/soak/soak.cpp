@@ -7,13 +7,13 @@
  *
  *   dockpose_soak [--duration-s S] [--seed N] [--keep-log]
  *
- * One fault cycle (about 35 s), in constant strobe / track mode unless said:
+ * One fault cycle (about 17.5 s), in constant strobe / track mode unless said:
  *   camera stall 1 s; stall 3.2 s whose first restart fails; camera unplugged 2.5 s and plugged
  *   back; bus-off 0.5 s; three 200 ms blocked-bus bursts (frames wait, as on ENOBUFS); a genuine
  *   command (alternate strobe, search only); strobe errors for 300 ms (every LED switch fails);
- *   a 2 s command flood (random frames with valid CRCs on every id of the protocol, commands
- *   signed with another key, replays of the last genuine command, bare commands) with a genuine
- *   command in it (constant strobe, track).
+ *   a 2 s command flood (random frames with valid CRCs on the command ids, a few on the
+ *   sensor's, commands signed with another key, replays of the last genuine command, bare
+ *   commands) with a genuine command in it (constant strobe, track).
  *
  * Checked (any failure: exit status 1, each one named):
  *   1. no stale pose: every pose the controller accepts crossed the bus at most one frame
