@@ -90,6 +90,9 @@ struct CanSection : hal::CanOptions {
 	/* A report still waiting for the bus this long after it was queued is dropped unsent
 	 * (CanStats::tx_expired); 0: one camera frame period. */
 	int max_report_age_us = 0;
+	/* A pose whose exposure began longer ago than this when its report is made goes out as
+	 * no pose (the controller's decoder refuses older than 50 ms by default). */
+	int max_pose_latency_us = 50000;
 	/* Authentication (docs/can-protocol.md): the 128-bit key's file (empty: frames are not
 	 * authenticated), and the state file of the run counter the freshness values start from. */
 	std::string key_file;

@@ -339,6 +339,15 @@ const Field<CanSection> kCanFields[] = {
 		 "Status-only reports and heartbeats expire after one heartbeat interval.",
 	  .range = { 0, 1000000 },
 	  .unit = "us" },
+	{ .key = "max_pose_latency_us",
+	  .kind = Kind::Integer,
+	  .member = &CanSection::max_pose_latency_us,
+	  .doc = "A pose whose exposure began longer ago than this when its report is made "
+		 "(LatencyMs) goes out as no pose: the frame loop finished it too late to be "
+		 "true still. The default matches the controller-side decoder's default age "
+		 "bound (dockpose_can.h, Decoder::kDefaultMaxAgeUs).",
+	  .range = { 1000, 1000000 },
+	  .unit = "us" },
 	{ .key = "key_file",
 	  .kind = Kind::Path,
 	  .member = &CanSection::key_file,

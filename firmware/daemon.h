@@ -55,6 +55,8 @@ struct DaemonStats {
 	std::uint64_t sequence_gaps = 0; /* frames the sensor numbered but we never saw */
 	std::uint64_t processed = 0; /* frames that went through the pipeline */
 	std::uint64_t poses_valid = 0; /* reports sent with a valid pose */
+	std::uint64_t poses_late =
+		0; /* poses found, but sent as none: older than max_pose_latency_us */
 	std::uint64_t reports = 0; /* status frames sent for processed frames */
 	std::uint64_t stall_reports = 0; /* status frames sent while the camera stalled */
 	std::uint64_t stalls = 0; /* stall episodes */
@@ -157,6 +159,7 @@ private:
 	/* Frame bookkeeping. */
 	std::int64_t period_ns_; /* configured frame period: the overrun bound */
 	std::int64_t report_max_age_ns_; /* a report still queued this long after it is sent dies */
+	std::int64_t max_pose_latency_ns_; /* a pose older than this when sent is sent as none */
 	std::int64_t heartbeat_interval_ns_;
 	bool have_sequence_ = false;
 	std::uint64_t last_sequence_ = 0;
@@ -178,6 +181,7 @@ private:
 	static constexpr std::int64_t kFaultHoldNs = 1000000000;
 	FaultHold frames_dropped_{ kFaultHoldNs };
 	FaultHold can_overflow_{ kFaultHoldNs };
+	FaultHold bus_off_{ kFaultHoldNs }; /* bus-off events, and while the bus is off or down */
 	FaultHold strobe_error_{ kFaultHoldNs };
 	FaultHold command_rejected_{ kFaultHoldNs };
 	FaultHold overrun_{ kFaultHoldNs };

@@ -85,6 +85,8 @@ bool CanBusBase::send(const CanFrame &frame)
 	CanFrame queued = canWireFrame(frame);
 	queued.timestamp_ns = monotonicNs();
 	expire(queued.timestamp_ns);
+	if (tx_.full())
+		expireAll(queued.timestamp_ns);
 	const bool kept = tx_.push(queued);
 	transmit();
 	publish();
@@ -105,6 +107,19 @@ void CanBusBase::expire(std::int64_t now_ns)
 			return;
 		tx_.pop();
 		++stats_.tx_expired;
+	}
+}
+
+void CanBusBase::expireAll(std::int64_t now_ns)
+{
+	/* Once round the ring: the frames still in time go back in order, the others go. */
+	for (std::size_t n = tx_.size(); n > 0; --n) {
+		CanFrame frame;
+		tx_.pop(&frame);
+		if (frame.deadline_ns != 0 && now_ns >= frame.deadline_ns)
+			++stats_.tx_expired;
+		else
+			tx_.push(frame);
 	}
 }
 

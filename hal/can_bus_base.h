@@ -17,7 +17,9 @@
  *  - a queued frame whose deadline_ns has passed is dropped unsent
  *    (tx_expired + 1): backends take the next frame with nextToSend(), which
  *    drops the expired ones ahead of it, and send() and expire() drop those at
- *    the head of the queue.
+ *    the head of the queue; a full queue first drops the expired frames
+ *    anywhere in it, so that a frame still in time (a heartbeat queued ahead
+ *    of reports that expire sooner) is not pushed out by stale ones.
  *
  * Reception: the backend hands every frame that passed its filters to
  * received(): rx_frames + 1, and it joins a ring of the depth the backend
@@ -96,6 +98,8 @@ protected:
 	/* Drop the expired frames at the head of the queue (a bus that takes
 	 * nothing still gets rid of them); the backend's poll() calls it. */
 	void expire(std::int64_t now_ns);
+	/* Drop the expired frames anywhere in the queue (send() does, when it is full). */
+	void expireAll(std::int64_t now_ns);
 	/* receive() found the ring empty: fetch what the bus has, if it can. */
 	virtual void fetch() {}
 

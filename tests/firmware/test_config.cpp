@@ -27,6 +27,7 @@
 #include "firmware/config.h"
 #include "firmware/config_table.h"
 #include "firmware/modes.h"
+#include "firmware/protocol/dockpose_can.h"
 
 namespace dockpose::firmware {
 namespace {
@@ -675,6 +676,12 @@ TEST_F(ConfigTest, ValuesAreRead)
 	EXPECT_EQ(c.pipeline.degraded_hold_frames, 0);
 	EXPECT_EQ(c.pipeline.lost_after_frames, 9);
 	EXPECT_FALSE(c.systemd.notify);
+}
+
+/* The sensor's default bound on a pose's latency is the controller decoder's default age bound. */
+TEST(CanSection, PoseLatencyBoundIsTheDecodersDefaultAge)
+{
+	EXPECT_EQ(board::CanSection{}.max_pose_latency_us, can::Decoder::kDefaultMaxAgeUs);
 }
 
 TEST_F(ConfigTest, BaseIdForms)
