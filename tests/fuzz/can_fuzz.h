@@ -95,8 +95,8 @@ public:
 		Verdict v;
 		/* Protocol 3: offsets 0x0..0x9 (0x8, 0x9: authentication), the command's 0x10, 0x11. */
 		const std::uint32_t o = f.id - base_id_;
-		const bool ours = f.id >= base_id_ &&
-				  (o <= can::kFreshness || o == can::kCommand || o == can::kCommandAuth);
+		const bool ours = f.id >= base_id_ && (o <= can::kFreshness || o == can::kCommand ||
+						       o == can::kCommandAuth);
 		if (!ours) {
 			v.error = can::FrameError::UnknownId;
 			return v;
