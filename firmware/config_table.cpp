@@ -500,6 +500,11 @@ constexpr bool kNamesMember = false;
 template<typename S, typename T>
 constexpr bool kNamesMember<S, T S::*> = sizeof(T) <= sizeof(S);
 
+/* GCC 12 at -O3 (the aarch64 release build) warns that the strings of `defaults` below "may be
+ * used uninitialized": a false positive of its inlining of the static's construction (they are
+ * value-initialised), which -Werror would turn into a failed build. */
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 template<typename S>
 std::string defaultText(const Field<S> &f)
 {
@@ -542,6 +547,7 @@ std::string defaultText(const Field<S> &f)
 		out += std::string("; ") + f.default_note;
 	return out;
 }
+#pragma GCC diagnostic pop
 
 template<typename S>
 std::string rangeText(const Field<S> &f)
