@@ -503,8 +503,10 @@ constexpr bool kNamesMember<S, T S::*> = sizeof(T) <= sizeof(S);
 /* GCC 12 at -O3 (the aarch64 release build) warns that the strings of `defaults` below "may be
  * used uninitialized": a false positive of its inlining of the static's construction (they are
  * value-initialised), which -Werror would turn into a failed build. */
+#if defined(__GNUC__) && !defined(__clang__) /* clang has no such warning, and says so */
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 template<typename S>
 std::string defaultText(const Field<S> &f)
 {
@@ -547,7 +549,9 @@ std::string defaultText(const Field<S> &f)
 		out += std::string("; ") + f.default_note;
 	return out;
 }
+#if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
+#endif
 
 template<typename S>
 std::string rangeText(const Field<S> &f)
