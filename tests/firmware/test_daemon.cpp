@@ -174,13 +174,7 @@ public:
 	void sendCommand(const can::CommandData &command)
 	{
 		const can::RawFrame raw = command_encoder_.encodeCommand(command);
-		hal::CanFrame f;
-		f.id = raw.id;
-		f.len = raw.len;
-		for (int i = 0; i < 8; ++i)
-			f.data[static_cast<std::size_t>(i)] = raw.data[static_cast<std::size_t>(i)];
-		controller_->send(f);
-		controller_->poll();
+		sendFrames(&raw, 1);
 	}
 
 	struct Report {
@@ -501,8 +495,6 @@ TEST(Daemon, FullCanQueueDropsAndCountsWhileTheLoopKeepsRate)
 	ASSERT_TRUE(rig.waitForValidPose(10s));
 
 	const std::uint64_t frames_before = rig.daemon_->stats().frames;
-	const Pose before_pose = rig.camera_->truthAt(0);
-	(void)before_pose;
 	rig.hub_->setBlocked(true);
 	std::this_thread::sleep_for(1s);
 	const std::uint64_t frames_blocked = rig.daemon_->stats().frames - frames_before;
