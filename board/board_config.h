@@ -78,8 +78,8 @@ struct StrobeSection : hal::StrobeLine {
 	int pulse_margin_us = 500;
 };
 
-/* The CAN section is the hal's bus options (tx_queue_depth; fd stays off: the
- * protocol's frames are classic) plus what the board adds. */
+/* The CAN section is the hal's bus options (tx_queue_depth; fd: reports as one CAN FD
+ * frame, DP_ReportFd) plus what the board adds. */
 struct CanSection : hal::CanOptions {
 	std::string backend; /* one the board wires (board::backendNames): "socketcan", "file" */
 	std::string interface; /* socketcan: "can0" */

@@ -683,13 +683,27 @@ void checkAcross(Section &st, StrobeSection &out, const Reads &reads, BoardConfi
 		       "required when strobe.backend is \"gpiod\" (the line offset on the chip)");
 }
 
-void checkAcross(Section &can, CanSection &out, const Reads &reads, BoardConfig & /*config*/)
+void checkAcross(Section &can, CanSection &out, const Reads &reads, BoardConfig &config)
 {
 	if (reads.got(can.at("backend")) == Got::Ok && out.backend == "socketcan" &&
 	    reads.got(can.at("interface")) == Got::Absent)
 		can.checker().fail(
 			can.at("interface"),
 			R"(required when can.backend is "socketcan" (an interface such as "can0"))");
+	/* The bus-load check: a report per camera frame must fit the bus, worst-case stuffing. */
+	if (reads.got(can.at("bitrate")) == Got::Bad || reads.got(can.at("heartbeat_hz")) == Got::Bad)
+		return;
+	const double load = canBusLoad(config);
+	if (load > 1.0)
+		can.checker().fail(can.at("bitrate"),
+				   std::to_string(out.bitrate) + " bit/s cannot carry a report per "
+				   "camera frame: worst case " + num(std::round(load * 1000.0) / 10.0) +
+				   " % of the bus at camera.frame_rate_hz " +
+				   num(config.camera.frame_rate_hz) + ", heartbeat_hz " +
+				   std::to_string(out.heartbeat_hz) +
+				   (out.key_file.empty() ? "" : ", authenticated") +
+				   (out.fd ? ", CAN FD" : "") +
+				   " (a faster bus, can.fd, or a lower frame rate)");
 }
 
 void checkAcross(Section &pl, PipelineSection &out, const Reads &reads, BoardConfig &config)
@@ -956,6 +970,16 @@ ConfigResult parseWithSource(const std::string &json_text, const std::string &ba
 }
 
 } /* namespace */
+
+double canBusLoad(const BoardConfig &config)
+{
+	const CanSection &can = config.can;
+	const bool authenticated = !can.key_file.empty();
+	return can.fd ? can::worstCaseFdBusLoad(config.camera.frame_rate_hz, can.heartbeat_hz,
+						can.bitrate, 0.0, authenticated)
+		      : can::worstCaseBusLoad(config.camera.frame_rate_hz, can.heartbeat_hz,
+					      can.bitrate, 0.0, authenticated);
+}
 
 ConfigResult parseBoardConfig(const std::string &json_text, const std::string &base_dir)
 {

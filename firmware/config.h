@@ -44,4 +44,9 @@ ConfigResult loadBoardConfig(const std::string &path);
 /* Parse and validate JSON text; base_dir resolves relative paths. */
 ConfigResult parseBoardConfig(const std::string &json_text, const std::string &base_dir);
 
+/* The worst-case share of the bus (0..1, 1 = full) the sensor takes with this configuration:
+ * a report with pose per camera frame (one DP_ReportFd with can.fd), the heartbeats, their MAC
+ * frames when authenticated; at can.bitrate, worst-case stuffing. Allocates: never. */
+double canBusLoad(const BoardConfig &config);
+
 } /* namespace dockpose::firmware */

@@ -318,6 +318,13 @@ const Field<CanSection> kCanFields[] = {
 	  .unit = "bit/s",
 	  .hint = "a standard CAN bit rate",
 	  .one_of = kCanBitrates },
+	{ .key = "fd",
+	  .kind = Kind::Boolean,
+	  .member = &CanSection::fd,
+	  .doc = "CAN FD: each report goes as one 64-byte DP_ReportFd frame instead of up to eight "
+		 "classic frames (heartbeats and commands stay classic; docs/can-protocol.md). The "
+		 "interface must be an FD one (`ip link set can0 type can bitrate 500000 dbitrate "
+		 "2000000 fd on`); dockposed sends without bit-rate switching." },
 	{ .key = "tx_queue_depth",
 	  .kind = Kind::Integer,
 	  .member = &CanSection::tx_queue_depth,

@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "firmware/can_auth.h"
+#include "firmware/can_frames.h"
 #include "firmware/modes.h"
 #include "hal/clock.h"
 
@@ -33,16 +34,6 @@ constexpr int kWholeFramesAfterLightChange = 4;
 /* A command must answer one of the sensor's last this many freshness values (DP_Auth frames:
  * about 3.6 s at 60 frames/s, 25 s when only heartbeats go out). */
 constexpr std::uint64_t kCommandFreshnessWindow = 256;
-
-hal::CanFrame toHal(const can::RawFrame &raw, std::int64_t deadline_ns)
-{
-	hal::CanFrame frame;
-	frame.deadline_ns = deadline_ns;
-	frame.id = raw.id;
-	frame.len = raw.len;
-	std::copy(raw.data.begin(), raw.data.end(), frame.data.begin());
-	return frame;
-}
 
 PipelineConfig pipelineConfig(const PipelineSection &section)
 {
@@ -167,10 +158,14 @@ hal::Status Daemon::start()
 	next_heartbeat_ns_ = start_ns_;
 	started_ = true;
 	applyStrobeMode(strobe_mode_);
-	std::fprintf(log_, "dockposed: board %s: camera %s, strobe %s (%s), can %s (base 0x%03x)\n",
+	std::fprintf(log_,
+		     "dockposed: board %s: camera %s, strobe %s (%s), can %s (base 0x%03x%s, "
+		     "worst-case load %.1f %% of %d bit/s)\n",
 		     config_.board.c_str(), backends_.camera->name().c_str(),
 		     backends_.strobe->name().c_str(), strobeModeName(strobe_mode_),
-		     backends_.can->name().c_str(), config_.can.base_id);
+		     backends_.can->name().c_str(), config_.can.base_id,
+		     config_.can.fd ? ", CAN FD reports" : "", 100.0 * canBusLoad(config_),
+		     config_.can.bitrate);
 	notifier_.ready();
 	return hal::Status::ok();
 }
@@ -568,6 +563,12 @@ int Daemon::sendReport(const can::StatusData &status, const can::PoseData *pose,
 {
 	can::RawFrame frames[can::kMaxReportFrames];
 	const int n = encoder_.encodeReport(status, pose, frames);
+	can::FdFrame fd;
+	if (config_.can.fd && can::packFd(frames, n, config_.can.base_id, &fd)) {
+		if (!backends_.can->send(toHalFrame(fd, deadline_ns)))
+			++stats_.can_send_drops;
+		return n;
+	}
 	sendFrames(frames, n, deadline_ns);
 	return n;
 }
@@ -575,7 +576,7 @@ int Daemon::sendReport(const can::StatusData &status, const can::PoseData *pose,
 void Daemon::sendFrames(const can::RawFrame *frames, int count, std::int64_t deadline_ns)
 {
 	for (int i = 0; i < count; ++i)
-		if (!backends_.can->send(toHal(frames[i], deadline_ns)))
+		if (!backends_.can->send(toHalFrame(frames[i], deadline_ns)))
 			++stats_.can_send_drops;
 }
 
@@ -610,12 +611,7 @@ void Daemon::handleCommands()
 {
 	hal::CanFrame in;
 	while (backends_.can->receive(&in)) {
-		can::RawFrame raw;
-		raw.id = in.id;
-		raw.len = in.len;
-		std::copy_n(in.data.begin(), std::min<std::size_t>(in.len, raw.data.size()),
-			    raw.data.begin());
-		const can::Decoder::Event event = command_decoder_.feed(raw);
+		const can::Decoder::Event event = command_decoder_.feed(toRawFrame(in));
 		if (event == can::Decoder::Event::Command) {
 			applyCommand(command_decoder_.command());
 		} else if (event == can::Decoder::Event::Rejected) {

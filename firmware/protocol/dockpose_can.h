@@ -19,6 +19,12 @@
  * quaternion A and B, angles, sigma, quality, in that order) followed by the
  * status frame; the status frame completes the report.
  *
+ * CAN FD (optional, the sensor's can.fd): a report's frames go packed in one
+ * 64-byte FD frame, DP_ReportFd (base + kReportFd): slot k, bytes 8k..8k+7,
+ * holds the classic frame kFdSlots[k] byte for byte (counter, sequence and CRC
+ * as computed for its classic id), or eight zero bytes when the report has no
+ * such frame. packFd() and Decoder::feedFd() are the two ends.
+ *
  * Units: millimetres, degrees, pixels, milliseconds, hertz, microseconds, as
  * in the field names. Threads: an Encoder or Decoder belongs to one thread.
  */
@@ -55,6 +61,7 @@ enum Offset : std::uint32_t {
 	kQuality = 0x7, /* a pose frame, sent before the status */
 	kAuth = 0x8, /* the MAC of the sensor's frames since the previous one */
 	kFreshness = 0x9, /* the sensor's freshness value, high bits (before a heartbeat's MAC) */
+	kReportFd = 0xa, /* CAN FD only: a whole report in one 64-byte frame (packFd) */
 	kCommand = 0x10,
 	kCommandAuth = 0x11, /* the MAC of the command before it */
 };
@@ -257,6 +264,104 @@ constexpr double worstCaseBusLoad(double frames_hz, double heartbeat_hz, double 
 	const double command = authenticated ? kMaxCommandFrames : 1;
 	return (report * frames_hz + heartbeat * heartbeat_hz + command * command_hz) *
 	       worstCaseFrameBits(kFrameLength) / bitrate;
+}
+
+/* Bits on the wire of a CAN FD standard-id data frame of `data_bytes` bytes (a CAN FD length)
+ * sent without bit-rate switching, worst-case stuffing, interframe space included: 22 bits
+ * SOF..DLC and the data with their dynamic stuff bits, the stuff count and CRC (17 bits up to
+ * 16 bytes, 21 beyond) with their fixed stuff bits, 13 bits of delimiters, ACK, EOF and IFS.
+ * 712 for 64 bytes. */
+constexpr int worstCaseFdFrameBits(int data_bytes)
+{
+	const int head = 22 + 8 * data_bytes;
+	const int crc = 4 + (data_bytes <= 16 ? 17 : 21);
+	return head + (head - 1) / 4 + crc + (crc + 3) / 4 + 13;
+}
+
+/* Bytes of DP_ReportFd: eight classic frames of eight bytes. */
+constexpr std::uint8_t kFdReportLength = 64;
+
+/* The same as worstCaseBusLoad() with `fd`: every report one DP_ReportFd (its data phase at
+ * the arbitration bit rate: no bit-rate switching), heartbeats and commands classic.
+ * 60 / 10 / 500 kbit/s, authenticated: 0.0938. */
+constexpr double worstCaseFdBusLoad(double frames_hz, double heartbeat_hz, double bitrate,
+				    double command_hz = 0.0, bool authenticated = false)
+{
+	const double heartbeat = authenticated ? kMaxHeartbeatFrames : 1;
+	const double command = authenticated ? kMaxCommandFrames : 1;
+	return (frames_hz * worstCaseFdFrameBits(kFdReportLength) +
+		(heartbeat * heartbeat_hz + command * command_hz) *
+			worstCaseFrameBits(kFrameLength)) /
+	       bitrate;
+}
+
+/* DP_ReportFd's slots: the classic frame each carries, in the order they are sent. */
+constexpr std::array<std::uint32_t, 8> kFdSlots = { kTranslation, kQuatA, kQuatB,  kAngles,
+						    kSigma,	  kQuality, kStatus, kAuth };
+
+/* A CAN FD frame of the protocol (DP_ReportFd). */
+struct FdFrame {
+	std::uint32_t id = 0;
+	std::uint8_t len = 0;
+	std::array<std::uint8_t, 64> data{};
+};
+
+/* The slot of DP_ReportFd that carries the classic frame at `offset`, -1 for none. */
+constexpr int fdSlot(std::uint32_t offset)
+{
+	for (std::size_t k = 0; k < kFdSlots.size(); ++k)
+		if (kFdSlots[k] == offset)
+			return static_cast<int>(k);
+	return -1;
+}
+
+/*
+ * Packs one report's frames (Encoder::encodeReport()'s, base id base_id) into
+ * DP_ReportFd. False, with out untouched, when a frame is not one a report has
+ * (another id, a length other than 8) or two frames want the same slot.
+ * Allocates: never.
+ */
+inline bool packFd(const RawFrame *frames, int count, std::uint32_t base_id, FdFrame *out)
+{
+	FdFrame fd;
+	fd.id = (base_id + kReportFd) & 0x7ff;
+	fd.len = kFdReportLength;
+	std::uint8_t used = 0;
+	for (int i = 0; i < count; ++i) {
+		const RawFrame &f = frames[i];
+		const int k = f.id < base_id ? -1 : fdSlot(f.id - base_id);
+		if (k < 0 || f.len != kFrameLength || (used & (1u << k)))
+			return false;
+		used = static_cast<std::uint8_t>(used | (1u << k));
+		for (std::size_t b = 0; b < kFrameLength; ++b)
+			fd.data[static_cast<std::size_t>(k) * kFrameLength + b] = f.data[b];
+	}
+	*out = fd;
+	return true;
+}
+
+/*
+ * The classic frames DP_ReportFd carries, in slot order, an all-zero slot left
+ * out (no frame: the frame's own CRC and counter make an all-zero classic frame
+ * of ours a 1-in-256 accident, and missing it only makes that report
+ * incomplete). Returns how many were written to out (at most 8). Allocates: never.
+ */
+inline int unpackFd(const FdFrame &fd, std::uint32_t base_id, RawFrame *out)
+{
+	int n = 0;
+	for (std::size_t k = 0; k < kFdSlots.size(); ++k) {
+		RawFrame f;
+		f.id = (base_id + kFdSlots[k]) & 0x7ff;
+		f.len = kFrameLength;
+		bool any = false;
+		for (std::size_t b = 0; b < kFrameLength; ++b) {
+			f.data[b] = fd.data[k * kFrameLength + b];
+			any = any || f.data[b] != 0;
+		}
+		if (any)
+			out[n++] = f;
+	}
+	return n;
 }
 
 struct PoseData {
@@ -930,6 +1035,27 @@ public:
 		return take(frame);
 	}
 
+	/*
+	 * A DP_ReportFd from the bus (CAN FD), and its arrival time: its classic
+	 * frames are taken one by one as if they had come in that order (the same
+	 * counters, CRCs, MAC and dating). Report when they completed a report;
+	 * Rejected when the frame is not a 64-byte DP_ReportFd (length_errors,
+	 * unknown_ids) or one of its frames was refused (the first refusal is
+	 * lastError()); the report is then not valid.
+	 */
+	Event feedFd(const FdFrame &frame, std::int64_t arrival_us)
+	{
+		timed_ = true;
+		arrival_us_ = arrival_us;
+		return takeFd(frame);
+	}
+	/* The same, undated. */
+	Event feedFd(const FdFrame &frame)
+	{
+		timed_ = false;
+		return takeFd(frame);
+	}
+
 	/* Check MACs from now on (nullptr: accept unauthenticated frames again). */
 	void setAuthenticator(MacFunction *mac)
 	{
@@ -962,6 +1088,48 @@ public:
 	std::int64_t poseAgeUs() const { return pose_age_us_; }
 
 private:
+	Event takeFd(const FdFrame &frame)
+	{
+		if (frame.id != ((base_id_ + kReportFd) & 0x7ff)) {
+			++counters_.frames;
+			++counters_.unknown_ids;
+			last_error_ = FrameError::UnknownId;
+			return Event::None;
+		}
+		if (frame.len != kFdReportLength) {
+			++counters_.frames;
+			++counters_.length_errors;
+			last_error_ = FrameError::WrongLength;
+			return Event::Rejected;
+		}
+		std::array<RawFrame, kFdSlots.size()> frames;
+		const int n = unpackFd(frame, base_id_, frames.data());
+		Event result = Event::None;
+		FrameError first = FrameError::None;
+		for (int i = 0; i < n; ++i) {
+			const RawFrame &f = frames[static_cast<std::size_t>(i)];
+			/* A keyless receiver ignores the MAC slot: the status is then the last
+			 * frame taken, so a report completes only after every other part. */
+			if (!mac_ && f.id == ((base_id_ + kAuth) & 0x7ff))
+				continue;
+			const Event e = take(f);
+			if (e == Event::Rejected && first == FrameError::None)
+				first = last_error_;
+			if (e != Event::None)
+				result = e;
+		}
+		if (first != FrameError::None) {
+			/* A refused part leaves the report incomplete (its status, when it
+			 * came, already said so); nothing of it is held for later frames. */
+			dropGroup();
+			pending_mask_ = 0;
+			pose_valid_ = false;
+			last_error_ = first;
+			return Event::Rejected;
+		}
+		return result;
+	}
+
 	Event take(const RawFrame &frame)
 	{
 		using namespace detail;

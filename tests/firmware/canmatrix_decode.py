@@ -58,6 +58,8 @@ def main():
 			try:
 				stamp, _iface, frame_text = line.split()[:3]
 				id_text, data_text = frame_text.split("#", 1)
+				if data_text.startswith("#"):  # CAN FD: id##<flags><data>
+					data_text = data_text[2:]
 				can_id = int(id_text, 16)
 				data = bytes.fromhex(data_text)
 				timestamp = float(stamp.strip("()"))

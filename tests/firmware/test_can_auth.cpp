@@ -227,6 +227,47 @@ TEST_F(AuthTest, EveryFlippedBitOfAReportIsRefused)
 	EXPECT_GT(controller_.counters().auth_failures, 0u);
 }
 
+/* CAN FD: the report's frames in one DP_ReportFd, the same MAC; every bit of every slot
+ * flipped (its CRC fixed) is refused, and a replayed frame too. */
+TEST_F(AuthTest, CanFdReportsAreAuthenticatedLikeTheirClassicFrames)
+{
+	sync();
+	RawFrame frames[kMaxReportFrames];
+	for (int i = 0; i < 50; ++i) {
+		const int n = report(600 + i, frames);
+		FdFrame fd;
+		ASSERT_TRUE(packFd(frames, n, kDefaultBaseId, &fd));
+		ASSERT_EQ(controller_.feedFd(fd), Event::Report) << i;
+		ASSERT_TRUE(controller_.poseValid());
+		EXPECT_NEAR(controller_.pose().t_mm[2], 600 + i, 0.05);
+	}
+	const int n = report(700, frames);
+	FdFrame recorded;
+	ASSERT_TRUE(packFd(frames, n, kDefaultBaseId, &recorded));
+	ASSERT_EQ(controller_.feedFd(recorded), Event::Report);
+	EXPECT_EQ(controller_.feedFd(recorded), Event::Rejected) << "a replay";
+	EXPECT_FALSE(controller_.poseValid());
+
+	int refused = 0, trials = 0;
+	for (std::size_t k = 0; k < kFdSlots.size(); ++k) {
+		for (int bit = 0; bit < 56; ++bit) {
+			sync();
+			const int m = report(900, frames);
+			RawFrame &f = frames[k];
+			f.data[static_cast<std::size_t>(bit / 8)] ^=
+				static_cast<std::uint8_t>(1u << (bit % 8));
+			f = withCrc(f);
+			FdFrame fd;
+			ASSERT_TRUE(packFd(frames, m, kDefaultBaseId, &fd));
+			++trials;
+			if (controller_.feedFd(fd) != Event::Report || !controller_.poseValid())
+				++refused;
+		}
+	}
+	EXPECT_EQ(refused, trials) << "a flipped bit that still gave a valid pose";
+	EXPECT_EQ(trials, 448);
+}
+
 TEST_F(AuthTest, AReplayedReportIsRefused)
 {
 	sync();

@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <random>
 #include <sstream>
 #include <string>
@@ -735,6 +736,109 @@ TEST(CanProtocol, BusLoad)
 	EXPECT_LE(worstCaseBusLoad(60, 10, 250000, 0.0, true), 0.30);
 }
 
+/* ---- CAN FD: a report in one DP_ReportFd ---- */
+
+TEST(CanFd, FrameBitsAndBusLoad)
+{
+	/* 22 + 512 bits, 133 stuff bits, 4 + 21 CRC bits with 7 fixed stuff bits, 13. */
+	EXPECT_EQ(worstCaseFdFrameBits(64), 712);
+	EXPECT_EQ(worstCaseFdFrameBits(8), 22 + 64 + 21 + 4 + 17 + 6 + 13);
+	/* One FD frame carries eight classic frames' bytes in less than their bits. */
+	EXPECT_LT(worstCaseFdFrameBits(64), kMaxReportFrames * worstCaseFrameBits(8));
+	const double fd = worstCaseFdBusLoad(60, 10, 500000, 0.0, true);
+	EXPECT_NEAR(fd, (60 * 712 + 3 * 10 * 135) / 500000.0, 1e-12);
+	EXPECT_NEAR(fd, 0.0935, 1e-4);
+	EXPECT_LT(fd, worstCaseBusLoad(60, 10, 500000, 0.0, true));
+	EXPECT_NEAR(worstCaseFdBusLoad(60, 10, 500000), (60 * 712 + 10 * 135) / 500000.0, 1e-12);
+}
+
+TEST(CanFd, ReportsRoundTripThroughOneFrame)
+{
+	RandomReports gen(7);
+	Encoder enc(0x520);
+	Decoder classic(0x520);
+	Decoder fd(0x520);
+	for (int i = 0; i < 500; ++i) {
+		const bool with_pose = i % 5 != 2;
+		const PoseData pose = gen.pose();
+		const StatusData status = gen.status(with_pose);
+		RawFrame frames[kReportFrames];
+		const int n = enc.encodeReport(status, &pose, frames);
+		FdFrame packed;
+		ASSERT_TRUE(packFd(frames, n, 0x520, &packed));
+		EXPECT_EQ(packed.id, 0x520u + kReportFd);
+		EXPECT_EQ(packed.len, kFdReportLength);
+		/* A report without a pose leaves the pose slots zero. */
+		for (std::size_t b = 0; !with_pose && b < 6 * 8; ++b)
+			ASSERT_EQ(packed.data[b], 0) << b;
+		ASSERT_EQ(feedAll(classic, frames, n), Event::Report);
+		ASSERT_EQ(fd.feedFd(packed), Event::Report) << i;
+		ASSERT_EQ(fd.poseValid(), with_pose);
+		ASSERT_EQ(fd.poseValid(), classic.poseValid());
+		expectStatusNear(fd.status(), classic.status());
+		if (with_pose)
+			expectPoseNear(fd.pose(), classic.pose());
+		EXPECT_EQ(fd.sequence(), classic.sequence());
+	}
+	const Decoder::Counters &c = fd.counters();
+	EXPECT_EQ(c.reports, 500u);
+	EXPECT_EQ(c.valid_poses, 400u);
+	EXPECT_EQ(c.crc_errors + c.length_errors + c.alive_gaps + c.incomplete_poses, 0u);
+}
+
+TEST(CanFd, BadFramesAreRefusedAndCounted)
+{
+	Encoder enc;
+	Decoder dec;
+	RandomReports gen(3);
+	const PoseData pose = gen.pose();
+	RawFrame frames[kReportFrames];
+	const int n = enc.encodeReport(gen.status(true), &pose, frames);
+	FdFrame packed;
+	ASSERT_TRUE(packFd(frames, n, kDefaultBaseId, &packed));
+
+	FdFrame short_frame = packed;
+	short_frame.len = 48;
+	EXPECT_EQ(dec.feedFd(short_frame), Event::Rejected);
+	EXPECT_EQ(dec.lastError(), FrameError::WrongLength);
+	EXPECT_EQ(dec.counters().length_errors, 1u);
+
+	FdFrame other = packed;
+	other.id = kDefaultBaseId + kReportFd + 1;
+	EXPECT_EQ(dec.feedFd(other), Event::None);
+	EXPECT_EQ(dec.lastError(), FrameError::UnknownId);
+
+	/* A bit flipped in any pose slot: no valid pose, the frame refused by that slot's CRC. */
+	for (std::size_t bit = 0; bit < 6 * 64; bit += 7) {
+		Encoder e;
+		Decoder d;
+		RawFrame f[kReportFrames];
+		const int m = e.encodeReport(gen.status(true), &pose, f);
+		FdFrame p;
+		ASSERT_TRUE(packFd(f, m, kDefaultBaseId, &p));
+		p.data[bit / 8] ^= static_cast<std::uint8_t>(1u << (bit % 8));
+		EXPECT_EQ(d.feedFd(p), Event::Rejected) << bit;
+		EXPECT_FALSE(d.poseValid()) << bit;
+		EXPECT_EQ(d.lastError(), FrameError::BadCrc) << bit;
+	}
+
+	/* The same frame twice: its frames' alive counters repeat. */
+	Decoder twice;
+	ASSERT_EQ(twice.feedFd(packed), Event::Report);
+	EXPECT_TRUE(twice.poseValid());
+	EXPECT_EQ(twice.feedFd(packed), Event::Rejected);
+	EXPECT_FALSE(twice.poseValid());
+	EXPECT_EQ(twice.lastError(), FrameError::StaleAlive);
+
+	/* Frames that are not a report's do not pack. */
+	FdFrame untouched;
+	const RawFrame hb = enc.encodeHeartbeat(HeartbeatData{});
+	EXPECT_FALSE(packFd(&hb, 1, kDefaultBaseId, &untouched));
+	RawFrame two[2] = { frames[0], frames[0] };
+	EXPECT_FALSE(packFd(two, 2, kDefaultBaseId, &untouched));
+	EXPECT_EQ(untouched.len, 0);
+}
+
 /* ---- Freshness: the decoder dates reports (feed with an arrival time) ---- */
 
 namespace {
@@ -952,6 +1056,17 @@ std::string candumpLine(double t, const RawFrame &f)
 	return std::string(buf) + "\n";
 }
 
+/* A CAN FD line as candump -l writes it: id##<flags><data>. */
+std::string candumpLine(double t, const FdFrame &f)
+{
+	char buf[192];
+	int n = std::snprintf(buf, sizeof(buf), "(%.6f) can0 %03X##0", t, f.id);
+	for (std::size_t i = 0; i < f.len; ++i)
+		n += std::snprintf(buf + n, sizeof(buf) - static_cast<std::size_t>(n), "%02X",
+				   f.data[i]);
+	return std::string(buf) + "\n";
+}
+
 double clampD(double v, double lo, double hi)
 {
 	return std::min(std::max(v, lo), hi);
@@ -1018,11 +1133,19 @@ protected:
 			RawFrame out[kReportFrames];
 			const int k = enc.encodeReport(r.status, &r.pose, out);
 			ASSERT_EQ(k, r.with_pose ? kReportFrames : 1);
+			if (fd_) {
+				FdFrame fd;
+				ASSERT_TRUE(packFd(out, k, base, &fd));
+				log << candumpLine(t, fd);
+				report_times_.push_back(t);
+			}
 			for (int j = 0; j < k; ++j) {
-				log << candumpLine(t + 0.0001 * j, out[j]);
+				if (!fd_)
+					log << candumpLine(t + 0.0001 * j, out[j]);
 				frames_.push_back(out[j]);
 			}
-			report_times_.push_back(t + 0.0001 * (k - 1));
+			if (!fd_)
+				report_times_.push_back(t + 0.0001 * (k - 1));
 			reports_.push_back(r);
 			if (i % 6 == 0) {
 				HeartbeatData hb;
@@ -1065,7 +1188,7 @@ protected:
 				    quote(dir_ + "/log.log"),
 			    dir_);
 		ASSERT_EQ(r.status, 0) << r.err;
-		const std::vector<nlohmann::json> objs = jsonLines(r.out);
+		const std::vector<nlohmann::json> objs = fdSlotsAsFrames(jsonLines(r.out), base);
 		ASSERT_EQ(objs.size(), frames_.size());
 
 		std::size_t report = 0, hb = 0;
@@ -1242,6 +1365,51 @@ protected:
 		EXPECT_NE(r.err.find("CRC 0, length 0, alive gaps 0"), std::string::npos) << r.err;
 	}
 
+	/* canmatrix's DP_ReportFd objects as the classic frames of their slots: its signals
+	 * "<Message>_<Signal>" grouped by message (DP_<Message>), a slot whose raw values are all
+	 * zero left out (no frame), in slot order. Other objects as they are. */
+	static std::vector<nlohmann::json> fdSlotsAsFrames(const std::vector<nlohmann::json> &objs,
+							   std::uint32_t base)
+	{
+		static const std::pair<const char *, std::uint32_t> kSlotMessages[] = {
+			{ "Translation", kTranslation }, { "QuatA", kQuatA },
+			{ "QuatB", kQuatB },		 { "Angles", kAngles },
+			{ "Sigma", kSigma },		 { "Quality", kQuality },
+			{ "Status", kStatus },		 { "Auth", kAuth },
+		};
+		std::vector<nlohmann::json> out;
+		for (const nlohmann::json &o : objs) {
+			if (o["message"] != "DP_ReportFd") {
+				out.push_back(o);
+				continue;
+			}
+			EXPECT_EQ(o["raw"].size(), 54u) << "DP_ReportFd's signals";
+			for (std::size_t k = 0; k < kFdSlots.size(); ++k) {
+				/* The slot order is the header's (kFdSlots); the names the DBC's. */
+				const auto &[name, offset] = kSlotMessages[k];
+				EXPECT_EQ(offset, kFdSlots[k]);
+				nlohmann::json frame = { { "id", base + offset },
+							 { "message", std::string("DP_") + name },
+							 { "signals", nlohmann::json::object() },
+							 { "raw", nlohmann::json::object() } };
+				bool any = false;
+				const std::string prefix = std::string(name) + "_";
+				for (const auto &[sig, value] : o["raw"].items()) {
+					if (sig.rfind(prefix, 0) != 0)
+						continue;
+					const std::string classic = sig.substr(prefix.size());
+					frame["raw"][classic] = value;
+					frame["signals"][classic] = o["signals"][sig];
+					any = any || value.get<std::uint64_t>() != 0;
+				}
+				if (any)
+					out.push_back(frame);
+			}
+		}
+		return out;
+	}
+
+	bool fd_ = false;
 	std::string dir_, source_, python_, dbc_;
 	std::vector<Report> reports_;
 	std::vector<double> report_times_;
@@ -1308,6 +1476,68 @@ TEST(CanProtocol, SignalLayoutsAreTheDbcs)
 		/* Clear of bytes 6 and 7 (AliveCounter, Sequence, CRC). */
 		EXPECT_LE(start + length, 48u);
 	}
+}
+
+/* DP_ReportFd in the DBC is the classic messages of kFdSlots, slot k's signals named
+ * <Message>_<Signal> at the classic start bit + 64 k, everything else on the line the same. */
+TEST(CanFd, TheDbcsReportFdIsTheClassicMessagesInSlotOrder)
+{
+	const std::string dbc = readFile(std::string(DOCKPOSE_SOURCE_DIR) +
+					 "/firmware/protocol/dockpose.dbc");
+	/* id -> (name, its SG_ lines) */
+	struct Message {
+		std::string name;
+		std::vector<std::string> signals;
+	};
+	std::map<unsigned int, Message> messages;
+	std::istringstream in(dbc);
+	std::string line;
+	unsigned int current = 0;
+	while (std::getline(in, line)) {
+		unsigned int id = 0, size = 0;
+		char name[64] = {};
+		if (std::sscanf(line.c_str(), "BO_ %u %63[^:]: %u", &id, name, &size) == 3) {
+			current = id;
+			messages[id].name = name;
+		} else if (line.rfind(" SG_ ", 0) == 0) {
+			messages[current].signals.push_back(line);
+		}
+	}
+	const auto fd = messages.find(kDbcBaseId + kReportFd);
+	ASSERT_NE(fd, messages.end()) << "no DP_ReportFd";
+	EXPECT_EQ(fd->second.name, "DP_ReportFd");
+	EXPECT_NE(dbc.find("BO_ 778 DP_ReportFd: 64 DOCKPOSE"), std::string::npos);
+	EXPECT_NE(dbc.find("BA_ \"VFrameFormat\" BO_ 778 14;"), std::string::npos)
+		<< "DP_ReportFd must be marked a CAN FD frame (StandardCAN_FD)";
+	std::size_t expected = 0;
+	for (std::size_t k = 0; k < kFdSlots.size(); ++k) {
+		const Message &classic = messages.at(kDbcBaseId + kFdSlots[k]);
+		const std::string prefix = classic.name.substr(3) + "_";
+		for (const std::string &sg : classic.signals) {
+			char sig[64] = {};
+			unsigned int start = 0;
+			ASSERT_EQ(std::sscanf(sg.c_str(), " SG_ %63s : %u|", sig, &start), 2) << sg;
+			const std::string rest = sg.substr(sg.find('|'));
+			const std::string want = " SG_ " + prefix + sig + " : " +
+						 std::to_string(start + 64 * k) + rest;
+			EXPECT_NE(std::find(fd->second.signals.begin(), fd->second.signals.end(), want),
+				  fd->second.signals.end())
+				<< "DP_ReportFd lacks: " << want;
+			++expected;
+		}
+	}
+	EXPECT_EQ(fd->second.signals.size(), expected) << "DP_ReportFd has signals of no slot";
+}
+
+/* can.fd: each report one DP_ReportFd; canmatrix decodes its 54 signals with the DBC into
+ * the same values as the classic frames, and scripts/candecode takes the same reports. */
+TEST_F(CanToolsTest, CanFdReportsDecodeWithTheDbc)
+{
+	fd_ = true;
+	writeLog(kDefaultBaseId, 150);
+	ASSERT_FALSE(HasFatalFailure());
+	checkCanmatrix(kDefaultBaseId);
+	checkCandecode(kDefaultBaseId);
 }
 
 TEST_F(CanToolsTest, OtherBaseIdIsRemapped)

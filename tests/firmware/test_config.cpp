@@ -320,6 +320,16 @@ const BadFile kBadFiles[] = {
 	  R"({ "can": { "bitrate": 300000 } })",
 	  nullptr,
 	  { "can.bitrate: 300000 is not a standard CAN bit rate (one of 10000, 20000" } },
+	{ "bitrate_too_slow_for_the_reports",
+	  R"({ "can": { "bitrate": 50000 } })",
+	  nullptr,
+	  { "can.bitrate: 50000 bit/s cannot carry a report per camera frame: worst case 116.1 % of "
+	    "the bus at camera.frame_rate_hz 60, heartbeat_hz 10 (a faster bus, can.fd, or a lower "
+	    "frame rate)" } },
+	{ "fd_not_a_boolean",
+	  R"({ "can": { "fd": "yes" } })",
+	  nullptr,
+	  { "can.fd: expected true or false, got a string" } },
 	{ "queue_zero",
 	  R"({ "can": { "tx_queue_depth": 0 } })",
 	  nullptr,
@@ -781,6 +791,22 @@ TEST_F(ConfigTest, ExposureUpToTheFramePeriodIsAccepted)
 	EXPECT_TRUE(loadText(doc.dump()).ok());
 	doc["camera"]["exposure_us"] = 10001;
 	EXPECT_FALSE(loadText(doc.dump()).ok());
+}
+
+/* The bus-load check: 60 reports/s at 50 kbit/s do not fit as classic frames (116 %), but do
+ * as one CAN FD frame each (88 %); canBusLoad() is the header's formula. */
+TEST_F(ConfigTest, TheBusLoadCheckCountsCanFdReports)
+{
+	json doc = baseConfig();
+	doc["can"]["bitrate"] = 50000;
+	EXPECT_FALSE(loadText(doc.dump()).ok());
+	doc["can"]["fd"] = true;
+	const ConfigResult r = loadText(doc.dump());
+	ASSERT_TRUE(r.ok()) << joinErrors(r.errors);
+	EXPECT_TRUE(r.config.can.fd);
+	EXPECT_NEAR(canBusLoad(r.config), (60 * 712 + 10 * 135) / 50000.0, 1e-12);
+	doc["camera"]["frame_rate_hz"] = 70;
+	EXPECT_FALSE(loadText(doc.dump()).ok()) << "70 FD reports/s at 50 kbit/s: 102 %";
 }
 
 /*

@@ -27,6 +27,7 @@
 #include "board/sim/sim_board.h"
 #include "firmware/config.h"
 #include "firmware/daemon.h"
+#include "firmware/can_frames.h"
 #include "firmware/protocol/dockpose_can.h"
 #include "firmware/protocol/dockpose_can_cmac.h"
 #include "hal/clock.h"
@@ -83,10 +84,10 @@ public:
 
 		controller_ = std::make_unique<hal::LoopbackCanBus>(hub_, "controller");
 		const hal::CanFilter all{ 0, 0, false };
+		hal::CanOptions options;
+		options.fd = config.can.fd;
 		EXPECT_TRUE(
-			controller_
-				->open(std::span<const hal::CanFilter>(&all, 1), hal::CanOptions{})
-				.isOk());
+			controller_->open(std::span<const hal::CanFilter>(&all, 1), options).isOk());
 	}
 
 	~Rig() { stop(); }
@@ -114,13 +115,7 @@ public:
 	{
 		hal::CanFrame f;
 		while (controller_->receive(&f)) {
-			can::RawFrame raw;
-			raw.id = f.id;
-			raw.len = f.len;
-			for (int i = 0; i < 8; ++i)
-				raw.data[static_cast<std::size_t>(i)] =
-					f.data[static_cast<std::size_t>(i)];
-			switch (decoder_.feed(raw)) {
+			switch (feedDecoder(decoder_, f)) {
 			case can::Decoder::Event::Report:
 				reports_.push_back({ decoder_.status(), decoder_.poseValid(),
 						     decoder_.pose(), hal::monotonicNs() });
@@ -161,13 +156,8 @@ public:
 
 	void sendFrames(const can::RawFrame *frames, int n)
 	{
-		for (int k = 0; k < n; ++k) {
-			hal::CanFrame f;
-			f.id = frames[k].id;
-			f.len = frames[k].len;
-			std::copy_n(frames[k].data.begin(), 8, f.data.begin());
-			controller_->send(f);
-		}
+		for (int k = 0; k < n; ++k)
+			controller_->send(toHalFrame(frames[k]));
 		controller_->poll();
 	}
 
@@ -252,6 +242,50 @@ TEST(Daemon, SimBoardAt60HzGivesAccuratePosesForNearlyEveryFrame)
 	EXPECT_EQ(rig.rejected_, 0);
 	EXPECT_GT(rig.heartbeats_.size(), 20u);
 	EXPECT_GT(stats.latency.count(), 0u);
+}
+
+/* can.fd: every report leaves as one DP_ReportFd (no classic report frame), heartbeats stay
+ * classic, and the controller's decoder takes the same accurate poses from them. */
+TEST(Daemon, WithCanFdEveryReportIsOneFdFrame)
+{
+	BoardConfig config = simConfig();
+	config.can.fd = true;
+	Rig rig(config);
+	rig.start(2.0);
+	ASSERT_TRUE(rig.waitFor([&] { return rig.finished_.load(); }, 30s));
+	rig.stop();
+	EXPECT_EQ(rig.exit_status_, 0);
+
+	const DaemonStats &stats = rig.daemon_->stats();
+	ASSERT_GT(stats.frames, 30u);
+	std::size_t fd_frames = 0, heartbeats = 0;
+	for (const hal::CanFrame &f : rig.hub_->traffic()) {
+		const std::uint32_t offset = f.id - can::kDefaultBaseId;
+		if (offset == can::kReportFd) {
+			++fd_frames;
+			EXPECT_TRUE(f.fd);
+			EXPECT_EQ(f.len, can::kFdReportLength);
+		} else {
+			EXPECT_FALSE(f.fd) << "only reports go as CAN FD";
+			EXPECT_TRUE(offset == can::kHeartbeat) << "a classic frame of a report: 0x"
+							      << std::hex << f.id;
+			heartbeats += offset == can::kHeartbeat;
+		}
+	}
+	/* Every report, the final shutdown status included. */
+	EXPECT_EQ(fd_frames, rig.reports_.size());
+	EXPECT_GE(fd_frames, stats.reports);
+	EXPECT_EQ(heartbeats, rig.heartbeats_.size());
+	int valid = 0, checked = 0;
+	for (const auto &r : rig.reports_) {
+		if (!r.pose_valid)
+			continue;
+		++valid;
+		expectAccurate(r.pose, rig.camera_->truthAt(r.pose.frame_counter), &checked);
+	}
+	EXPECT_GE(static_cast<double>(valid), 0.95 * static_cast<double>(stats.frames));
+	EXPECT_EQ(rig.rejected_, 0);
+	EXPECT_EQ(rig.reports_.back().status.state, can::SensorState::Shutdown);
 }
 
 TEST(Daemon, CommandFramesChangeModeStrobeAndEnable)
@@ -553,10 +587,7 @@ TEST(Daemon, AfterAOneSecondBusStallNoStaleReportReachesTheBus)
 	int after_stall = 0;
 	std::int64_t longest_us = 0;
 	for (const hal::CanFrame &f : rig.hub_->traffic()) {
-		can::RawFrame raw;
-		raw.id = f.id;
-		raw.len = f.len;
-		std::copy_n(f.data.begin(), 8, raw.data.begin());
+		const can::RawFrame raw = toRawFrame(f);
 		dated.feed(raw, f.timestamp_ns / 1000);
 		if (raw.id != can::kDefaultBaseId + can::kQuality)
 			continue;

@@ -33,6 +33,7 @@
 #include <cstdint>
 #include <span>
 
+#include "firmware/can_frames.h"
 #include "firmware/modes.h"
 #include "hal/can_bus.h"
 #include "hal/sim/sim_can.h"
@@ -76,11 +77,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t *data, std::size_t size
 			   "only standard frames with the command id pass the daemon's filter");
 
 		/* As Daemon::handleCommands copies a received frame. */
-		can::RawFrame raw;
-		raw.id = frame.id;
-		raw.len = frame.len;
-		std::copy_n(frame.data.begin(), std::min<std::size_t>(frame.len, raw.data.size()),
-			    raw.data.begin());
+		const can::RawFrame raw = firmware::toRawFrame(frame);
 
 		const Verdict v = model.judge(raw);
 		const Event event = decoder.feed(raw);

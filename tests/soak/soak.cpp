@@ -54,6 +54,7 @@
 
 #include "algo/pose.h"
 #include "board/sim/sim_board.h"
+#include "firmware/can_frames.h"
 #include "firmware/config.h"
 #include "firmware/daemon.h"
 #include "firmware/protocol/dockpose_can.h"
@@ -142,15 +143,6 @@ double rssKb()
 double seconds(std::int64_t ns)
 {
 	return static_cast<double>(ns) * 1e-9;
-}
-
-hal::CanFrame toHal(const can::RawFrame &raw)
-{
-	hal::CanFrame f;
-	f.id = raw.id;
-	f.len = raw.len;
-	std::copy_n(raw.data.begin(), 8, f.data.begin());
-	return f;
 }
 
 class Soak
@@ -393,12 +385,9 @@ void Soak::pump()
 {
 	hal::CanFrame f;
 	while (controller_->receive(&f)) {
-		can::RawFrame raw;
-		raw.id = f.id;
-		raw.len = f.len;
-		std::copy_n(f.data.begin(), 8, raw.data.begin());
+		const can::RawFrame raw = firmware::toRawFrame(f);
 		const std::int64_t arrival_us = f.timestamp_ns / 1000;
-		const can::Decoder::Event event = decoder_.feed(raw, arrival_us);
+		const can::Decoder::Event event = firmware::feedDecoder(decoder_, f, arrival_us);
 		/* The wait of the report's DP_Quality as the decoder took it (a frame it refused is
 		 * in no report): its wire time against the sensor's stamp. */
 		if (raw.id == kBase + can::kQuality && event != can::Decoder::Event::Rejected) {
@@ -620,7 +609,7 @@ void Soak::settle()
 void Soak::sendAttacker(const can::RawFrame *frames, int n)
 {
 	for (int i = 0; i < n; ++i)
-		(void)attacker_->send(toHal(frames[i]));
+		(void)attacker_->send(firmware::toHalFrame(frames[i]));
 	attacker_->poll();
 }
 
@@ -635,7 +624,7 @@ bool Soak::sendGenuine(const can::CommandData &command, Mode target)
 		const int n =
 			command_encoder_.encodeCommand(command, last_echo_, last_genuine_.data());
 		for (int i = 0; i < n; ++i)
-			(void)controller_->send(toHal(last_genuine_[static_cast<std::size_t>(i)]));
+			(void)controller_->send(firmware::toHalFrame(last_genuine_[static_cast<std::size_t>(i)]));
 		controller_->poll();
 		have_genuine_ = true;
 		++genuine_sent_;
