@@ -691,19 +691,22 @@ void checkAcross(Section &can, CanSection &out, const Reads &reads, BoardConfig 
 			can.at("interface"),
 			R"(required when can.backend is "socketcan" (an interface such as "can0"))");
 	/* The bus-load check: a report per camera frame must fit the bus, worst-case stuffing. */
-	if (reads.got(can.at("bitrate")) == Got::Bad || reads.got(can.at("heartbeat_hz")) == Got::Bad)
+	if (reads.got(can.at("bitrate")) == Got::Bad ||
+	    reads.got(can.at("heartbeat_hz")) == Got::Bad)
 		return;
 	const double load = canBusLoad(config);
 	if (load > 1.0)
 		can.checker().fail(can.at("bitrate"),
-				   std::to_string(out.bitrate) + " bit/s cannot carry a report per "
-				   "camera frame: worst case " + num(std::round(load * 1000.0) / 10.0) +
-				   " % of the bus at camera.frame_rate_hz " +
-				   num(config.camera.frame_rate_hz) + ", heartbeat_hz " +
-				   std::to_string(out.heartbeat_hz) +
-				   (out.key_file.empty() ? "" : ", authenticated") +
-				   (out.fd ? ", CAN FD" : "") +
-				   " (a faster bus, can.fd, or a lower frame rate)");
+				   std::to_string(out.bitrate) +
+					   " bit/s cannot carry a report per "
+					   "camera frame: worst case " +
+					   num(std::round(load * 1000.0) / 10.0) +
+					   " % of the bus at camera.frame_rate_hz " +
+					   num(config.camera.frame_rate_hz) + ", heartbeat_hz " +
+					   std::to_string(out.heartbeat_hz) +
+					   (out.key_file.empty() ? "" : ", authenticated") +
+					   (out.fd ? ", CAN FD" : "") +
+					   " (a faster bus, can.fd, or a lower frame rate)");
 }
 
 void checkAcross(Section &pl, PipelineSection &out, const Reads &reads, BoardConfig &config)

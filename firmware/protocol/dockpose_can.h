@@ -296,7 +296,7 @@ constexpr double worstCaseFdBusLoad(double frames_hz, double heartbeat_hz, doubl
 }
 
 /* DP_ReportFd's slots: the classic frame each carries, in the order they are sent. */
-constexpr std::array<std::uint32_t, 8> kFdSlots = { kTranslation, kQuatA, kQuatB,  kAngles,
+constexpr std::array<std::uint32_t, 8> kFdSlots = { kTranslation, kQuatA,   kQuatB,  kAngles,
 						    kSigma,	  kQuality, kStatus, kAuth };
 
 /* A CAN FD frame of the protocol (DP_ReportFd). */

@@ -1372,10 +1372,14 @@ protected:
 							   std::uint32_t base)
 	{
 		static const std::pair<const char *, std::uint32_t> kSlotMessages[] = {
-			{ "Translation", kTranslation }, { "QuatA", kQuatA },
-			{ "QuatB", kQuatB },		 { "Angles", kAngles },
-			{ "Sigma", kSigma },		 { "Quality", kQuality },
-			{ "Status", kStatus },		 { "Auth", kAuth },
+			{ "Translation", kTranslation },
+			{ "QuatA", kQuatA },
+			{ "QuatB", kQuatB },
+			{ "Angles", kAngles },
+			{ "Sigma", kSigma },
+			{ "Quality", kQuality },
+			{ "Status", kStatus },
+			{ "Auth", kAuth },
 		};
 		std::vector<nlohmann::json> out;
 		for (const nlohmann::json &o : objs) {
@@ -1482,8 +1486,8 @@ TEST(CanProtocol, SignalLayoutsAreTheDbcs)
  * <Message>_<Signal> at the classic start bit + 64 k, everything else on the line the same. */
 TEST(CanFd, TheDbcsReportFdIsTheClassicMessagesInSlotOrder)
 {
-	const std::string dbc = readFile(std::string(DOCKPOSE_SOURCE_DIR) +
-					 "/firmware/protocol/dockpose.dbc");
+	const std::string dbc =
+		readFile(std::string(DOCKPOSE_SOURCE_DIR) + "/firmware/protocol/dockpose.dbc");
 	/* id -> (name, its SG_ lines) */
 	struct Message {
 		std::string name;
@@ -1520,7 +1524,8 @@ TEST(CanFd, TheDbcsReportFdIsTheClassicMessagesInSlotOrder)
 			const std::string rest = sg.substr(sg.find('|'));
 			const std::string want = " SG_ " + prefix + sig + " : " +
 						 std::to_string(start + 64 * k) + rest;
-			EXPECT_NE(std::find(fd->second.signals.begin(), fd->second.signals.end(), want),
+			EXPECT_NE(std::find(fd->second.signals.begin(), fd->second.signals.end(),
+					    want),
 				  fd->second.signals.end())
 				<< "DP_ReportFd lacks: " << want;
 			++expected;

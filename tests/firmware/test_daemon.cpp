@@ -25,9 +25,9 @@
 #include <gtest/gtest.h>
 
 #include "board/sim/sim_board.h"
+#include "firmware/can_frames.h"
 #include "firmware/config.h"
 #include "firmware/daemon.h"
-#include "firmware/can_frames.h"
 #include "firmware/protocol/dockpose_can.h"
 #include "firmware/protocol/dockpose_can_cmac.h"
 #include "hal/clock.h"
@@ -267,8 +267,8 @@ TEST(Daemon, WithCanFdEveryReportIsOneFdFrame)
 			EXPECT_EQ(f.len, can::kFdReportLength);
 		} else {
 			EXPECT_FALSE(f.fd) << "only reports go as CAN FD";
-			EXPECT_TRUE(offset == can::kHeartbeat) << "a classic frame of a report: 0x"
-							      << std::hex << f.id;
+			EXPECT_TRUE(offset == can::kHeartbeat)
+				<< "a classic frame of a report: 0x" << std::hex << f.id;
 			heartbeats += offset == can::kHeartbeat;
 		}
 	}

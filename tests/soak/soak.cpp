@@ -624,7 +624,8 @@ bool Soak::sendGenuine(const can::CommandData &command, Mode target)
 		const int n =
 			command_encoder_.encodeCommand(command, last_echo_, last_genuine_.data());
 		for (int i = 0; i < n; ++i)
-			(void)controller_->send(firmware::toHalFrame(last_genuine_[static_cast<std::size_t>(i)]));
+			(void)controller_->send(
+				firmware::toHalFrame(last_genuine_[static_cast<std::size_t>(i)]));
 		controller_->poll();
 		have_genuine_ = true;
 		++genuine_sent_;
