@@ -123,6 +123,14 @@ struct SystemdSection {
 	bool notify = true; /* sd_notify READY/STATUS/WATCHDOG when NOTIFY_SOCKET is set */
 };
 
+/* The operator preview (firmware/preview.h): off by default. */
+struct PreviewSection {
+	bool enabled = false;
+	std::string name = "dockpose-preview"; /* the shared memory: /dev/shm/<name> */
+	double rate_hz = 10.0; /* at most this many frames a second */
+	int width = 320; /* pixels, at most; the frame is shrunk by an integer factor */
+};
+
 struct BoardConfig {
 	std::string board; /* "sim", "rpi5-imx296", ... : must match a board built into dockposed */
 	std::string path; /* the file it was read from */
@@ -131,6 +139,7 @@ struct BoardConfig {
 	CanSection can;
 	PipelineSection pipeline;
 	SystemdSection systemd;
+	PreviewSection preview;
 	/* Loaded once, when the file is validated: pipeline.target and camera.intrinsics. */
 	TargetModel target_model;
 	CameraIntrinsics camera_model;

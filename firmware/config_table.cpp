@@ -23,6 +23,7 @@ using board::BoardConfig;
 using board::CameraSection;
 using board::CanSection;
 using board::PipelineSection;
+using board::PreviewSection;
 using board::ReplayCameraConfig;
 using board::StrobeSection;
 using board::SystemdSection;
@@ -67,6 +68,16 @@ std::string checkInterface(const CanSection &can, const std::string &name)
 	return interfaceNameProblem(name);
 }
 
+/* preview.name: a POSIX shared-memory name without its leading "/". */
+std::string checkPreviewName(const PreviewSection & /*preview*/, const std::string &name)
+{
+	if (name.empty() || name.size() > 200)
+		return "must be 1 to 200 characters";
+	if (name.find('/') != std::string::npos)
+		return "must not contain '/' (it names /dev/shm/<name>)";
+	return {};
+}
+
 const Field<BoardConfig> kTopFields[] = {
 	{ .key = "board",
 	  .kind = Kind::String,
@@ -101,6 +112,10 @@ const Field<BoardConfig> kTopFields[] = {
 	  .kind = Kind::Object,
 	  .member = &BoardConfig::systemd,
 	  .doc = "The service manager's notifications (`systemd`, below)." },
+	{ .key = "preview",
+	  .kind = Kind::Object,
+	  .member = &BoardConfig::preview,
+	  .doc = "The operator preview for `dockpose view` (`preview`, below)." },
 };
 
 const Field<CameraSection> kCameraFields[] = {
@@ -448,6 +463,35 @@ const Field<SystemdSection> kSystemdFields[] = {
 		 "systemd)." },
 };
 
+const Field<PreviewSection> kPreviewFields[] = {
+	{ .key = "enabled",
+	  .kind = Kind::Boolean,
+	  .member = &PreviewSection::enabled,
+	  .doc = "Publish downscaled frames with what the pipeline found in them (blobs, matched "
+		 "LEDs, pose, state) into shared memory for `dockpose view`. The frame loop never "
+		 "waits for a reader." },
+	{ .key = "name",
+	  .kind = Kind::String,
+	  .member = &PreviewSection::name,
+	  .doc = "The shared memory's name: `/dev/shm/<name>` (`dockpose view --preview NAME`).",
+	  .check = checkPreviewName,
+	  .range_doc = "1 to 200 characters, no `/`" },
+	{ .key = "rate_hz",
+	  .kind = Kind::Number,
+	  .member = &PreviewSection::rate_hz,
+	  .doc = "At most this many frames a second are published (every Nth camera frame, N = "
+		 "ceil(camera.frame_rate_hz / rate_hz)).",
+	  .range = { 0.1, 10.0 },
+	  .unit = "Hz" },
+	{ .key = "width",
+	  .kind = Kind::Integer,
+	  .member = &PreviewSection::width,
+	  .doc = "The preview's width at most: the frame is shrunk by the smallest integer factor "
+		 "that fits (the mean of each block).",
+	  .range = { 16, 640 },
+	  .unit = "px" },
+};
+
 std::string hex(std::uint64_t v)
 {
 	char buf[24];
@@ -713,6 +757,12 @@ template<>
 std::span<const Field<SystemdSection>> fieldsOf<SystemdSection>()
 {
 	return kSystemdFields;
+}
+
+template<>
+std::span<const Field<PreviewSection>> fieldsOf<PreviewSection>()
+{
+	return kPreviewFields;
 }
 
 std::span<const std::int64_t> canBitrates()

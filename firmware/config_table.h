@@ -71,8 +71,8 @@ using Member =
 		     std::uint32_t S::*, std::uint64_t S::*, double (S::*)[6],
 		     board::StrobeMode S::*, board::TrackMode S::*, board::CameraSection S::*,
 		     board::StrobeSection S::*, board::CanSection S::*, board::PipelineSection S::*,
-		     board::SystemdSection S::*, hal::SyntheticScene S::*,
-		     board::ReplayCameraConfig S::*>;
+		     board::SystemdSection S::*, board::PreviewSection S::*,
+		     hal::SyntheticScene S::*, board::ReplayCameraConfig S::*>;
 
 /* One key of a section whose struct is S. */
 template<typename S>
@@ -121,6 +121,8 @@ template<>
 std::span<const Field<board::PipelineSection>> fieldsOf<board::PipelineSection>();
 template<>
 std::span<const Field<board::SystemdSection>> fieldsOf<board::SystemdSection>();
+template<>
+std::span<const Field<board::PreviewSection>> fieldsOf<board::PreviewSection>();
 
 /* The standard CAN bit rates can.bitrate accepts. */
 std::span<const std::int64_t> canBitrates();

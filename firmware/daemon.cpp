@@ -152,6 +152,8 @@ hal::Status Daemon::start()
 	if (auto s = backends_.camera->start(); !s)
 		return hal::Status::error("camera: " + s.message());
 
+	startPreview();
+
 	start_ns_ = hal::monotonicNs();
 	last_frame_ns_ = start_ns_;
 	rate_start_ns_ = start_ns_;
@@ -314,6 +316,14 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 
 	/* State machine → encoder → CAN. */
 	reportFrame(frame, result);
+
+	/* Every Nth frame to the operator preview (after the report: it never delays one). */
+	if (preview_.isOpen() && ++preview_count_ >= preview_every_) {
+		preview_count_ = 0;
+		preview_.publish(
+			frame.image, frame.sequence, frame.timestamp_ns, *pipeline_, result,
+			{ static_cast<std::uint8_t>(state_machine_.state()), last_faults_ });
+	}
 }
 
 /* The frame's bookkeeping. False: the frame is not of the camera model's size (counted). */
@@ -605,6 +615,27 @@ hal::Status Daemon::startAuthentication()
 	std::fprintf(log_, "dockposed: CAN frames authenticated (AES-128-CMAC, key %s, run %u)\n",
 		     config_.can.key_file.c_str(), run);
 	return hal::Status::ok();
+}
+
+/* preview.enabled: the shared-memory ring, every Nth frame. Optional: a preview that cannot be
+ * set up is said once and left off; the sensor runs without it. */
+void Daemon::startPreview()
+{
+	if (!config_.preview.enabled)
+		return;
+	const auto &k = pipeline_->camera().intrinsics();
+	if (auto s = preview_.open(config_.preview.name, k.width, k.height, config_.preview.width);
+	    !s) {
+		std::fprintf(log_, "dockposed: %s; running without it\n", s.message().c_str());
+		return;
+	}
+	preview_every_ = std::max(
+		1, static_cast<int>(std::ceil(
+			   config_.camera.frame_rate_hz / config_.preview.rate_hz - 1e-9)));
+	preview_count_ = preview_every_ - 1; /* the first frame goes out */
+	std::fprintf(log_, "dockposed: preview /dev/shm/%s: every %d frames, %d px wide\n",
+		     config_.preview.name.c_str(), preview_every_,
+		     k.width / previewFactor(k.width, config_.preview.width));
 }
 
 void Daemon::handleCommands()

@@ -39,6 +39,7 @@
 #include "firmware/config.h"
 #include "firmware/fault_hold.h"
 #include "firmware/latency_histogram.h"
+#include "firmware/preview.h"
 #include "firmware/protocol/dockpose_can.h"
 #include "firmware/protocol/dockpose_can_cmac.h"
 #include "firmware/state_machine.h"
@@ -131,6 +132,7 @@ private:
 	void logState(SensorState before, SensorState after, std::uint64_t sequence);
 	void updateSystemdStatus(std::int64_t now_ns);
 	void publishStats(std::int64_t now_ns);
+	void startPreview();
 	/* The CAN link going down (interface missing or down) or up: one log line each way. */
 	void logCanLink();
 
@@ -146,6 +148,10 @@ private:
 	std::int64_t last_reject_log_ns_ = 0;
 	std::uint64_t rejects_unlogged_ = 0;
 	SystemdNotifier notifier_;
+	/* The operator preview (preview.enabled): every preview_every_-th frame. */
+	PreviewWriter preview_;
+	int preview_every_ = 1;
+	int preview_count_ = 0;
 	DaemonStats stats_; /* frame thread */
 	mutable std::mutex stats_mutex_; /* guards published_stats_ */
 	DaemonStats published_stats_;

@@ -5,11 +5,14 @@
  * loopback CAN) runs for a while, then every operator new / malloc in the
  * whole process is counted over a window of about a second of frames.
  */
+#include <unistd.h>
+
 #include <atomic>
 #include <chrono>
 #include <cstdlib>
 #include <memory>
 #include <new>
+#include <string>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -47,6 +50,9 @@ TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
 	BoardConfig config = loaded.config;
 	config.systemd.notify = false;
 	config.camera.synthetic.loop = true;
+	/* The operator preview on: its publication is part of the frame loop. */
+	config.preview.enabled = true;
+	config.preview.name = "dockpose-test-noalloc-" + std::to_string(getpid());
 
 	auto hub = std::make_shared<hal::LoopbackHub>();
 	board::Backends b;

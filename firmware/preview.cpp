@@ -1,0 +1,319 @@
+/* SPDX-License-Identifier: MIT */
+#include "firmware/preview.h"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <limits>
+#include <type_traits>
+
+#include "hal/clock.h"
+
+namespace dockpose::firmware {
+
+static_assert(std::is_standard_layout_v<PreviewFrame>, "PreviewFrame is copied by bytes");
+static_assert(std::is_standard_layout_v<PreviewRing>);
+
+namespace {
+
+/* The bytes of a frame after its sequence: what the seqlock guards. */
+constexpr std::size_t kBodyOffset = offsetof(PreviewFrame, frame_counter);
+constexpr std::size_t kBodyBytes = sizeof(PreviewFrame) - kBodyOffset;
+
+std::uint8_t *body(PreviewFrame *f)
+{
+	return reinterpret_cast<std::uint8_t *>(f) + kBodyOffset;
+}
+
+const std::uint8_t *body(const PreviewFrame *f)
+{
+	return reinterpret_cast<const std::uint8_t *>(f) + kBodyOffset;
+}
+
+} /* namespace */
+
+std::string previewShmName(const std::string &name)
+{
+	return "/" + name;
+}
+
+int previewFactor(int full_width, int width)
+{
+	if (width <= 0 || full_width <= width)
+		return 1;
+	return (full_width + width - 1) / width;
+}
+
+void downscaleBox(const ImageView &in, int factor, std::uint8_t *out, int out_width, int out_height)
+{
+	if (factor <= 1) {
+		for (int y = 0; y < out_height; ++y)
+			std::memcpy(out + static_cast<std::ptrdiff_t>(y) * out_width, in.row(y),
+				    static_cast<std::size_t>(out_width));
+		return;
+	}
+	const int area = factor * factor;
+	for (int y = 0; y < out_height; ++y) {
+		std::uint8_t *o = out + static_cast<std::ptrdiff_t>(y) * out_width;
+		for (int x = 0; x < out_width; ++x) {
+			int sum = 0;
+			for (int dy = 0; dy < factor; ++dy) {
+				const std::uint8_t *r = in.row(y * factor + dy) + x * factor;
+				for (int dx = 0; dx < factor; ++dx)
+					sum += r[dx];
+			}
+			o[x] = static_cast<std::uint8_t>((sum + area / 2) / area);
+		}
+	}
+}
+
+PreviewWriter::~PreviewWriter()
+{
+	close();
+}
+
+hal::Status PreviewWriter::open(const std::string &name, int full_width, int full_height, int width)
+{
+	close();
+	if (width < 16 || width > kMaxPreviewWidth)
+		return hal::Status::error("preview: width " + std::to_string(width) +
+					  " is outside [16, " + std::to_string(kMaxPreviewWidth) +
+					  "]");
+	factor_ = previewFactor(full_width, width);
+	width_ = full_width / factor_;
+	height_ = full_height / factor_;
+	if (width_ <= 0 || height_ <= 0 ||
+	    static_cast<std::size_t>(width_) * static_cast<std::size_t>(height_) >
+		    kMaxPreviewPixels)
+		return hal::Status::error("preview: a " + std::to_string(full_width) + "x" +
+					  std::to_string(full_height) + " frame at width " +
+					  std::to_string(width) + " does not fit the preview's " +
+					  std::to_string(kMaxPreviewWidth) + "x" +
+					  std::to_string(kMaxPreviewHeight) + " pixels");
+	shm_name_ = previewShmName(name);
+	const int fd = shm_open(shm_name_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+	if (fd < 0)
+		return hal::Status::error("preview: cannot create shared memory " + shm_name_ +
+					  ": " + std::strerror(errno));
+	/* Readers may be allowed more than the umask gives; the mode is the documented one. */
+	(void)fchmod(fd, 0644);
+	if (ftruncate(fd, sizeof(PreviewRing)) != 0) {
+		const int err = errno;
+		::close(fd);
+		return hal::Status::error("preview: cannot size " + shm_name_ + " to " +
+					  std::to_string(sizeof(PreviewRing)) +
+					  " bytes: " + std::strerror(err));
+	}
+	void *map = mmap(nullptr, sizeof(PreviewRing), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+	const int err = errno;
+	::close(fd);
+	if (map == MAP_FAILED)
+		return hal::Status::error("preview: cannot map " + shm_name_ + ": " +
+					  std::strerror(err));
+	/* Invalidate first, so that a reader of a segment left by an earlier run sees nothing
+	 * half set up; then the header, then the magic last. */
+	auto *ring = static_cast<PreviewRing *>(map);
+	ring->magic = 0;
+	std::atomic_thread_fence(std::memory_order_release);
+	ring->version = kPreviewVersion;
+	ring->slots = kPreviewSlots;
+	ring->frame_bytes = sizeof(PreviewFrame);
+	ring->published.store(0, std::memory_order_relaxed);
+	for (PreviewFrame &f : ring->frame)
+		f.seq.store(0, std::memory_order_relaxed);
+	std::atomic_thread_fence(std::memory_order_release);
+	ring->magic = kPreviewMagic;
+	ring_ = ring;
+	return hal::Status::ok();
+}
+
+void PreviewWriter::close()
+{
+	if (!ring_)
+		return;
+	munmap(ring_, sizeof(PreviewRing));
+	ring_ = nullptr;
+	shm_unlink(shm_name_.c_str());
+}
+
+std::uint64_t PreviewWriter::published() const
+{
+	return ring_ ? ring_->published.load(std::memory_order_acquire) : 0;
+}
+
+void PreviewWriter::publish(const ImageView &image, std::uint64_t frame_counter,
+			    std::int64_t timestamp_ns, const Pipeline &pipeline,
+			    const PoseResult *result, PreviewStatus status)
+{
+	if (!ring_ || !image.valid() || image.width / factor_ < width_ ||
+	    image.height / factor_ < height_)
+		return;
+	const std::uint64_t n = ring_->published.load(std::memory_order_relaxed);
+	PreviewFrame &f = ring_->frame[n % kPreviewSlots];
+	const std::uint64_t seq = f.seq.load(std::memory_order_relaxed);
+	f.seq.store(seq + 1, std::memory_order_relaxed); /* odd: being written */
+	std::atomic_thread_fence(std::memory_order_release);
+
+	f.frame_counter = frame_counter;
+	f.timestamp_ns = timestamp_ns;
+	f.published_ns = hal::monotonicNs();
+	f.width = static_cast<std::uint16_t>(width_);
+	f.height = static_cast<std::uint16_t>(height_);
+	f.full_width = static_cast<std::uint16_t>(image.width);
+	f.full_height = static_cast<std::uint16_t>(image.height);
+	f.state = status.state;
+	f.faults = status.faults;
+	downscaleBox(image, factor_, f.pixels, width_, height_);
+
+	const bool found = result && result->found;
+	f.found = found ? 1 : 0;
+	f.pose_status = static_cast<std::uint8_t>(result ? result->status : PoseStatus::NoFrame);
+	f.tracked = found && result->tracked ? 1 : 0;
+	f.leds_used = found ? result->leds_used : 0;
+	f.led_mask = found ? result->led_mask : 0;
+	for (int i = 0; i < 3; ++i) {
+		f.t_mm[i] = found ? result->t_mm[i] : 0.0;
+		f.rpy_deg[i] = found ? result->rpy_deg[i] : 0.0;
+		f.sigma_t_mm[i] = found ? result->sigma_t_mm[i] : 0.0;
+		f.sigma_rpy_deg[i] = found ? result->sigma_rpy_deg[i] : 0.0;
+	}
+	f.q_wxyz[0] = found ? result->q.w() : 1.0;
+	f.q_wxyz[1] = found ? result->q.x() : 0.0;
+	f.q_wxyz[2] = found ? result->q.y() : 0.0;
+	f.q_wxyz[3] = found ? result->q.z() : 0.0;
+	f.rms_px = found ? result->rms_px : 0.0;
+	f.log10_nfa = found ? result->log10_nfa : 0.0;
+
+	const auto &blobs = pipeline.blobs();
+	f.blob_count =
+		static_cast<std::uint32_t>(std::min<std::size_t>(blobs.size(), kMaxCandidates));
+	for (std::uint32_t i = 0; i < f.blob_count; ++i) {
+		PreviewBlob &b = f.blobs[i];
+		b.u_px = static_cast<float>(blobs[i].u_px);
+		b.v_px = static_cast<float>(blobs[i].v_px);
+		b.area_px = static_cast<float>(blobs[i].area_px);
+		b.peak = blobs[i].peak;
+		b.matched = 0;
+	}
+
+	const TargetModel &model = pipeline.target();
+	const CameraModel &camera = pipeline.camera();
+	f.led_count = static_cast<std::uint32_t>(model.points_mm.size());
+	for (std::uint32_t i = 0; i < f.led_count; ++i) {
+		PreviewLed &led = f.leds[i];
+		led.index = static_cast<std::uint8_t>(i);
+		led.matched = found && (result->led_mask & (1u << i)) ? 1 : 0;
+		led.visible = 0;
+		led.u_px = led.v_px = 0.0f;
+		if (!found)
+			continue;
+		Eigen::Vector2d uv;
+		if (!camera.project(result->R * model.points_mm[i] + result->t_mm, &uv))
+			continue;
+		led.u_px = static_cast<float>(uv.x());
+		led.v_px = static_cast<float>(uv.y());
+		led.visible = camera.inImage(uv) ? 1 : 0;
+		if (!led.matched)
+			continue;
+		/* The blob the LED was matched to: the nearest to its projection (the pose's rms is
+		 * a fraction of a pixel, the blobs pixels apart). */
+		double best = std::numeric_limits<double>::max();
+		std::uint32_t best_i = f.blob_count;
+		for (std::uint32_t k = 0; k < f.blob_count; ++k) {
+			const double du = blobs[k].u_px - uv.x(), dv = blobs[k].v_px - uv.y();
+			const double d2 = du * du + dv * dv;
+			if (d2 < best) {
+				best = d2;
+				best_i = k;
+			}
+		}
+		if (best_i < f.blob_count)
+			f.blobs[best_i].matched = 1;
+	}
+	f.face_count = static_cast<std::uint32_t>(model.faces.size());
+	for (std::uint32_t i = 0; i < f.face_count; ++i)
+		for (int k = 0; k < 4; ++k)
+			f.faces[i][k] = static_cast<std::uint8_t>(model.faces[i][k]);
+
+	std::atomic_thread_fence(std::memory_order_release);
+	f.seq.store(seq + 2, std::memory_order_relaxed); /* even again: stable */
+	ring_->published.store(n + 1, std::memory_order_release);
+}
+
+PreviewReader::~PreviewReader()
+{
+	close();
+}
+
+hal::Status PreviewReader::open(const std::string &name)
+{
+	close();
+	const std::string shm = previewShmName(name);
+	const int fd = shm_open(shm.c_str(), O_RDONLY | O_CLOEXEC, 0);
+	if (fd < 0)
+		return hal::Status::error(
+			"preview " + shm + ": " + std::strerror(errno) +
+			(errno == ENOENT ? " (is dockposed running with preview.enabled?)" : ""));
+	struct stat st {
+	};
+	if (fstat(fd, &st) != 0 || st.st_size != static_cast<off_t>(sizeof(PreviewRing))) {
+		::close(fd);
+		return hal::Status::error("preview " + shm + ": " +
+					  std::to_string(static_cast<long long>(st.st_size)) +
+					  " bytes, not a preview ring of this version (" +
+					  std::to_string(sizeof(PreviewRing)) + " bytes)");
+	}
+	void *map = mmap(nullptr, sizeof(PreviewRing), PROT_READ, MAP_SHARED, fd, 0);
+	const int err = errno;
+	::close(fd);
+	if (map == MAP_FAILED)
+		return hal::Status::error("preview " + shm + ": cannot map: " + std::strerror(err));
+	const auto *ring = static_cast<const PreviewRing *>(map);
+	if (ring->magic != kPreviewMagic || ring->version != kPreviewVersion ||
+	    ring->slots != kPreviewSlots || ring->frame_bytes != sizeof(PreviewFrame)) {
+		munmap(map, sizeof(PreviewRing));
+		return hal::Status::error("preview " + shm +
+					  ": not a dockpose preview ring of version " +
+					  std::to_string(kPreviewVersion));
+	}
+	ring_ = ring;
+	return hal::Status::ok();
+}
+
+void PreviewReader::close()
+{
+	if (!ring_)
+		return;
+	munmap(const_cast<PreviewRing *>(ring_), sizeof(PreviewRing));
+	ring_ = nullptr;
+}
+
+std::uint64_t PreviewReader::latest(PreviewFrame *out, std::uint64_t after) const
+{
+	if (!ring_)
+		return 0;
+	for (int attempt = 0; attempt < 8; ++attempt) {
+		const std::uint64_t n = ring_->published.load(std::memory_order_acquire);
+		if (n == 0 || n <= after)
+			return 0;
+		const PreviewFrame &f = ring_->frame[(n - 1) % kPreviewSlots];
+		const std::uint64_t before = f.seq.load(std::memory_order_acquire);
+		if (before & 1u)
+			continue;
+		std::memcpy(body(out), body(&f), kBodyBytes);
+		std::atomic_thread_fence(std::memory_order_acquire);
+		if (f.seq.load(std::memory_order_relaxed) == before &&
+		    ring_->published.load(std::memory_order_relaxed) - n < kPreviewSlots) {
+			out->seq.store(before, std::memory_order_relaxed);
+			return n;
+		}
+	}
+	return 0;
+}
+
+} /* namespace dockpose::firmware */

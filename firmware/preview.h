@@ -1,0 +1,189 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The operator preview: every Nth camera frame, downscaled, with what the
+ * pipeline found in it (candidate blobs, matched LEDs with their model index,
+ * the model's faces and every LED projected from the pose, the pose, its σ,
+ * the sensor state), published into a fixed-size POSIX shared-memory ring
+ * (/dev/shm/<name>) that readers (`dockpose view`) map read-only.
+ *
+ * Each slot is a seqlock: the writer makes its sequence odd, writes, makes it
+ * even; a reader copies a slot and keeps the copy only when the sequence was
+ * the same even value before and after. The writer never waits for a reader,
+ * and a reader can never stop the writer (it cannot write the mapping).
+ *
+ * The layout is plain data of fixed size (PreviewRing), version
+ * kPreviewVersion; a reader refuses another magic, version or size.
+ *
+ * Threads: a PreviewWriter belongs to the frame thread; a PreviewReader to
+ * its reader's thread; any number of processes may read.
+ */
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "algo/capacities.h"
+#include "algo/image.h"
+#include "algo/pipeline.h"
+#include "hal/status.h"
+
+namespace dockpose::firmware {
+
+constexpr std::uint32_t kPreviewMagic = 0x56505044; /* "DPPV" */
+constexpr std::uint32_t kPreviewVersion = 1;
+/* Slots in the ring: a reader that copies one while the writer fills the next is never torn. */
+constexpr int kPreviewSlots = 4;
+/* The largest preview image: 640 x 512 pixels (preview.width is at most 640). */
+constexpr int kMaxPreviewWidth = 640;
+constexpr int kMaxPreviewHeight = 512;
+constexpr std::size_t kMaxPreviewPixels =
+	static_cast<std::size_t>(kMaxPreviewWidth) * kMaxPreviewHeight;
+
+static_assert(std::atomic<std::uint64_t>::is_always_lock_free,
+	      "the seqlock needs a lock-free 64-bit atomic in shared memory");
+
+/* A candidate blob, in full-frame pixels. */
+struct PreviewBlob {
+	float u_px = 0.0f, v_px = 0.0f;
+	float area_px = 0.0f;
+	std::uint8_t peak = 0;
+	std::uint8_t matched = 0; /* 1: the nearest blob to a matched LED's projection */
+	std::uint8_t reserved[2] = {};
+};
+
+/* A model LED projected from the pose, in full-frame pixels. */
+struct PreviewLed {
+	float u_px = 0.0f, v_px = 0.0f;
+	std::uint8_t index = 0; /* model LED index */
+	std::uint8_t matched = 0; /* 1: in the pose's led_mask */
+	std::uint8_t visible = 0; /* 1: in front of the camera and inside the image */
+	std::uint8_t reserved = 0;
+};
+
+/* One published frame. Read it only through PreviewReader (the seqlock). */
+struct PreviewFrame {
+	std::atomic<std::uint64_t> seq{ 0 }; /* even: stable; odd: being written */
+	std::uint64_t frame_counter = 0; /* the camera frame's sequence number */
+	std::int64_t timestamp_ns = 0; /* its exposure start, CLOCK_MONOTONIC */
+	std::int64_t published_ns = 0; /* when it was published, CLOCK_MONOTONIC */
+	std::uint16_t width = 0, height = 0; /* the preview image */
+	std::uint16_t full_width = 0, full_height = 0; /* the camera frame */
+	std::uint8_t state = 0; /* can::SensorState */
+	std::uint8_t faults = 0; /* can::fault bits */
+	std::uint8_t pose_status = 0; /* PoseStatus */
+	std::uint8_t found = 0;
+	std::uint8_t tracked = 0;
+	std::uint8_t reserved[3] = {};
+	std::int32_t leds_used = 0;
+	std::uint32_t led_mask = 0;
+	double t_mm[3] = {}, q_wxyz[4] = {}, rpy_deg[3] = {};
+	double sigma_t_mm[3] = {}, sigma_rpy_deg[3] = {};
+	double rms_px = 0.0, log10_nfa = 0.0;
+	std::uint32_t blob_count = 0;
+	PreviewBlob blobs[kMaxCandidates];
+	std::uint32_t led_count = 0; /* the model's LEDs (projected only when found) */
+	PreviewLed leds[kMaxLeds];
+	std::uint32_t face_count = 0; /* the model's faces: LED indices in cyclic order */
+	std::uint8_t faces[kMaxFaces][4] = {};
+	std::uint8_t pixels[kMaxPreviewPixels]; /* width x height, row-major, stride = width */
+};
+
+struct PreviewRing {
+	std::uint32_t magic = 0; /* kPreviewMagic once the writer set it up */
+	std::uint32_t version = 0;
+	std::uint32_t slots = 0;
+	std::uint32_t frame_bytes = 0; /* sizeof(PreviewFrame) */
+	/* The number of frames published so far; the latest is slot (published - 1) % slots. */
+	std::atomic<std::uint64_t> published{ 0 };
+	PreviewFrame frame[kPreviewSlots];
+};
+
+/* What the sensor reports with a frame: its state and fault bits. */
+struct PreviewStatus {
+	std::uint8_t state = 0;
+	std::uint8_t faults = 0;
+};
+
+/*
+ * The shared-memory name of preview.name (a POSIX name: "/" + name).
+ * Allocates: the string.
+ */
+std::string previewShmName(const std::string &name);
+
+/*
+ * Downscale `in` by an integer box factor into out (out_width x out_height =
+ * in / factor, rounded down), the mean of each factor x factor block.
+ * Allocates: never.
+ */
+void downscaleBox(const ImageView &in, int factor, std::uint8_t *out, int out_width,
+		  int out_height);
+
+/* The integer box factor that brings `full_width` to at most `width`: ceil(full / width). */
+int previewFactor(int full_width, int width);
+
+class PreviewWriter
+{
+public:
+	PreviewWriter() = default;
+	PreviewWriter(const PreviewWriter &) = delete;
+	PreviewWriter &operator=(const PreviewWriter &) = delete;
+	~PreviewWriter();
+
+	/*
+	 * Create (or take over) /dev/shm/<name>, size it to a PreviewRing, map
+	 * it; frames of full_width x full_height are published at most `width`
+	 * pixels wide. Mode 0644: any local user may watch. Allocates: here
+	 * (the mapping), never after.
+	 */
+	hal::Status open(const std::string &name, int full_width, int full_height, int width);
+	/* Unmap and unlink the segment (readers that have it mapped keep their copy). */
+	void close();
+	bool isOpen() const { return ring_ != nullptr; }
+
+	/*
+	 * Publish one frame: the image downscaled, the blobs and the pose of
+	 * `pipeline`'s last process() (which must have been run on this frame),
+	 * `result` the pose (nullptr: no pose this frame). Allocates: never.
+	 * Frame thread.
+	 */
+	void publish(const ImageView &image, std::uint64_t frame_counter, std::int64_t timestamp_ns,
+		     const Pipeline &pipeline, const PoseResult *result, PreviewStatus status);
+
+	std::uint64_t published() const;
+
+private:
+	PreviewRing *ring_ = nullptr;
+	std::string shm_name_;
+	int factor_ = 1;
+	int width_ = 0, height_ = 0;
+};
+
+class PreviewReader
+{
+public:
+	PreviewReader() = default;
+	PreviewReader(const PreviewReader &) = delete;
+	PreviewReader &operator=(const PreviewReader &) = delete;
+	~PreviewReader();
+
+	/* Map /dev/shm/<name> read-only; an error names the segment and why. Allocates: here. */
+	hal::Status open(const std::string &name);
+	void close();
+	bool isOpen() const { return ring_ != nullptr; }
+
+	/*
+	 * Copy the latest published frame into *out when there is one newer
+	 * than `after` (a count from published()); retried while the writer
+	 * overwrites it. Returns the count of the frame copied, 0 when there is
+	 * none newer (or it could not be read untorn in a few tries).
+	 * Allocates: never. *out must not be shared with another thread.
+	 */
+	std::uint64_t latest(PreviewFrame *out, std::uint64_t after = 0) const;
+
+private:
+	const PreviewRing *ring_ = nullptr;
+};
+
+} /* namespace dockpose::firmware */

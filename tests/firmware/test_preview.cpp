@@ -1,0 +1,249 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The operator preview's shared-memory ring (firmware/preview.h): a frame
+ * published with the pipeline's findings reads back whole, the seqlock never
+ * hands a reader a torn frame while the writer runs flat out, readers get
+ * clear errors, and the daemon publishes at preview.rate_hz when enabled.
+ */
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "algo/io/model_json.h"
+#include "algo/pipeline.h"
+#include "algo/synth/renderer.h"
+#include "board/sim/sim_board.h"
+#include "firmware/config.h"
+#include "firmware/daemon.h"
+#include "firmware/preview.h"
+#include "hal/sim/loopback_can_bus.h"
+
+namespace dockpose::firmware {
+namespace {
+
+using namespace std::chrono_literals;
+
+std::string uniqueName(const char *what)
+{
+	return std::string("dockpose-test-") + what + "-" + std::to_string(getpid());
+}
+
+TEST(Preview, FactorAndBoxDownscale)
+{
+	EXPECT_EQ(previewFactor(640, 320), 2);
+	EXPECT_EQ(previewFactor(1456, 320), 5);
+	EXPECT_EQ(previewFactor(1456, 640), 3);
+	EXPECT_EQ(previewFactor(320, 640), 1);
+	/* A 4x2 image by 2: the mean of each 2x2 block, rounded. */
+	const std::uint8_t pixels[] = { 0, 2, 10, 20, 1, 3, 30, 41 };
+	ImageView in{ pixels, 4, 2, 4 };
+	std::uint8_t out[2] = {};
+	downscaleBox(in, 2, out, 2, 1);
+	EXPECT_EQ(out[0], 2); /* (0 + 2 + 1 + 3) / 4 = 1.5 -> 2 */
+	EXPECT_EQ(out[1], 25); /* (10 + 20 + 30 + 41) / 4 = 25.25 */
+}
+
+TEST(Preview, APublishedFrameReadsBackWithThePipelinesFindings)
+{
+	const std::string data = DOCKPOSE_TEST_DATA;
+	const TargetModel target = loadTargetModel(data + "/wedge.json").value();
+	const CameraIntrinsics camera = loadCameraIntrinsics(data + "/cam512.json").value();
+	FrameRenderer renderer(target, camera);
+	RenderOptions options;
+	options.noise_sigma = 2.0;
+	options.reflections = 3;
+	Image frame;
+	renderer.render(poseAt(camera, target, 600.0, { 5.0, 10.0, -3.0 }), options, 11, &frame);
+	Pipeline pipeline(target, camera);
+	const PoseResult &result = pipeline.process(frame.view());
+	ASSERT_TRUE(result.found) << poseStatusName(result.status);
+
+	const std::string name = uniqueName("roundtrip");
+	PreviewWriter writer;
+	ASSERT_TRUE(writer.open(name, camera.width, camera.height, 200).isOk());
+	PreviewReader reader;
+	ASSERT_TRUE(reader.open(name).isOk());
+	auto got = std::make_unique<PreviewFrame>();
+	EXPECT_EQ(reader.latest(got.get()), 0u) << "nothing published yet";
+
+	writer.publish(frame.view(), 1234, 5678, pipeline, &result, { 2, 0x10 });
+	ASSERT_EQ(reader.latest(got.get()), 1u);
+	EXPECT_EQ(reader.latest(got.get(), 1), 0u) << "nothing newer than 1";
+	EXPECT_EQ(got->frame_counter, 1234u);
+	EXPECT_EQ(got->timestamp_ns, 5678);
+	EXPECT_EQ(got->state, 2);
+	EXPECT_EQ(got->faults, 0x10);
+	/* 512 px at most 200 wide: factor 3, 170 x 170. */
+	EXPECT_EQ(got->width, 170);
+	EXPECT_EQ(got->height, 170);
+	EXPECT_EQ(got->full_width, 512);
+	std::vector<std::uint8_t> expected(170u * 170u);
+	downscaleBox(frame.view(), 3, expected.data(), 170, 170);
+	EXPECT_TRUE(std::equal(expected.begin(), expected.end(), got->pixels));
+
+	EXPECT_EQ(got->found, 1);
+	EXPECT_EQ(got->leds_used, result.leds_used);
+	EXPECT_EQ(got->led_mask, result.led_mask);
+	for (int i = 0; i < 3; ++i) {
+		EXPECT_DOUBLE_EQ(got->t_mm[i], result.t_mm[i]);
+		EXPECT_DOUBLE_EQ(got->sigma_t_mm[i], result.sigma_t_mm[i]);
+	}
+	EXPECT_EQ(got->blob_count, pipeline.blobs().size());
+	EXPECT_EQ(got->led_count, target.points_mm.size());
+	EXPECT_EQ(got->face_count, target.faces.size());
+	/* Each matched LED's projection is on a matched blob (the pose's rms is sub-pixel). */
+	int matched_leds = 0, matched_blobs = 0;
+	for (std::uint32_t i = 0; i < got->led_count; ++i) {
+		const PreviewLed &led = got->leds[i];
+		EXPECT_EQ(led.index, i);
+		if (!led.matched)
+			continue;
+		++matched_leds;
+		EXPECT_EQ(led.visible, 1);
+		double best = 1e9;
+		for (std::uint32_t k = 0; k < got->blob_count; ++k)
+			if (got->blobs[k].matched)
+				best = std::min(best, static_cast<double>(std::hypot(
+							      got->blobs[k].u_px - led.u_px,
+							      got->blobs[k].v_px - led.v_px)));
+		EXPECT_LT(best, 1.0) << "LED " << i;
+	}
+	for (std::uint32_t k = 0; k < got->blob_count; ++k)
+		matched_blobs += got->blobs[k].matched;
+	EXPECT_EQ(matched_leds, result.leds_used);
+	EXPECT_EQ(matched_blobs, result.leds_used);
+
+	/* No pose: the frame still goes out, without pose or LEDs. */
+	writer.publish(frame.view(), 1235, 0, pipeline, nullptr, { 1, 0 });
+	ASSERT_EQ(reader.latest(got.get()), 2u);
+	EXPECT_EQ(got->found, 0);
+	EXPECT_EQ(got->leds_used, 0);
+	for (std::uint32_t i = 0; i < got->led_count; ++i)
+		EXPECT_EQ(got->leds[i].matched + got->leds[i].visible, 0);
+}
+
+/* The writer flat out, each frame's pixels all equal to its counter's low byte: every frame
+ * the reader gets is whole (its pixels agree with its counter), and the writer never waited. */
+TEST(Preview, TheSeqlockNeverHandsOutATornFrame)
+{
+	const std::string data = DOCKPOSE_TEST_DATA;
+	const TargetModel target = loadTargetModel(data + "/wedge.json").value();
+	const CameraIntrinsics camera = loadCameraIntrinsics(data + "/cam512.json").value();
+	Pipeline pipeline(target, camera);
+	std::vector<Image> frames;
+	for (int v = 0; v < 256; ++v) {
+		Image img(camera.width, camera.height);
+		std::fill(img.data(), img.data() + img.view().stride_bytes * img.view().height,
+			  static_cast<std::uint8_t>(v));
+		frames.push_back(std::move(img));
+	}
+	const std::string name = uniqueName("seqlock");
+	PreviewWriter writer;
+	ASSERT_TRUE(writer.open(name, camera.width, camera.height, 640).isOk());
+	PreviewReader reader;
+	ASSERT_TRUE(reader.open(name).isOk());
+
+	std::atomic<bool> stop{ false };
+	std::thread write([&] {
+		for (std::uint64_t c = 0; !stop; ++c)
+			writer.publish(frames[c & 0xff].view(), c, 0, pipeline, nullptr, {});
+	});
+	auto got = std::make_unique<PreviewFrame>();
+	int reads = 0, torn = 0;
+	std::uint64_t last = 0;
+	const auto end = std::chrono::steady_clock::now() + 1500ms;
+	while (std::chrono::steady_clock::now() < end && reads < 20000) {
+		const std::uint64_t n = reader.latest(got.get(), last);
+		if (n == 0)
+			continue;
+		++reads;
+		last = n;
+		const auto v = static_cast<std::uint8_t>(got->frame_counter & 0xff);
+		const std::size_t pixels = std::size_t{ got->width } * got->height;
+		for (std::size_t i = 0; i < pixels; i += 97)
+			if (got->pixels[i] != v) {
+				++torn;
+				break;
+			}
+	}
+	stop = true;
+	write.join();
+	EXPECT_GT(reads, 100) << "the reader never got a frame";
+	EXPECT_EQ(torn, 0) << torn << " torn frames of " << reads;
+	EXPECT_GT(writer.published(), static_cast<std::uint64_t>(reads));
+}
+
+TEST(Preview, ReadersGetClearErrors)
+{
+	PreviewReader reader;
+	const hal::Status missing = reader.open(uniqueName("absent"));
+	ASSERT_FALSE(missing.isOk());
+	EXPECT_NE(missing.message().find("is dockposed running with preview.enabled?"),
+		  std::string::npos)
+		<< missing.message();
+
+	PreviewWriter writer;
+	const hal::Status wide = writer.open(uniqueName("tall"), 640, 4000, 640);
+	ASSERT_FALSE(wide.isOk());
+	EXPECT_NE(wide.message().find("does not fit"), std::string::npos) << wide.message();
+	EXPECT_FALSE(writer.open(uniqueName("narrow"), 640, 480, 8).isOk());
+}
+
+/* preview.enabled on the sim board at 60 frames/s, 10 Hz: a reader sees the frames at that rate
+ * with the pose found in them, and the segment is gone after the daemon stops. */
+TEST(Preview, TheDaemonPublishesAtItsRate)
+{
+	ConfigResult loaded =
+		loadBoardConfig(std::string(DOCKPOSE_SOURCE_DIR) + "/board/sim/board.json");
+	ASSERT_TRUE(loaded.ok());
+	BoardConfig config = loaded.config;
+	config.systemd.notify = false;
+	config.camera.frame_rate_hz = 60.0;
+	config.camera.synthetic.loop = true;
+	config.preview.enabled = true;
+	config.preview.name = uniqueName("daemon");
+	config.preview.rate_hz = 10.0;
+
+	auto hub = std::make_shared<hal::LoopbackHub>();
+	board::Backends b;
+	ASSERT_TRUE(board::wireSimulated(config,
+					 std::make_unique<hal::LoopbackCanBus>(hub, "sensor"), &b)
+			    .isOk());
+	std::FILE *log = std::tmpfile();
+	{
+		Daemon daemon(config, std::move(b), log);
+		ASSERT_TRUE(daemon.start().isOk());
+		PreviewReader reader;
+		ASSERT_TRUE(reader.open(config.preview.name).isOk());
+		std::atomic<bool> stop{ false };
+		std::thread loop([&] { daemon.run(stop); });
+		std::this_thread::sleep_for(2000ms);
+		auto got = std::make_unique<PreviewFrame>();
+		const std::uint64_t n = reader.latest(got.get());
+		const std::uint64_t frames = daemon.stats().frames;
+		stop = true;
+		loop.join();
+		ASSERT_GT(frames, 30u);
+		/* Every 6th frame at 60 frames/s and 10 Hz. */
+		EXPECT_NEAR(static_cast<double>(n), static_cast<double>(frames) / 6.0, 2.0)
+			<< frames << " frames";
+		EXPECT_EQ(got->found, 1);
+		EXPECT_EQ(got->width, 320);
+		EXPECT_EQ(got->height, 240);
+		EXPECT_GT(got->leds_used, 3);
+	}
+	std::fclose(log);
+	PreviewReader after;
+	EXPECT_FALSE(after.open(config.preview.name).isOk()) << "the daemon unlinks its segment";
+}
+
+} /* namespace */
+} /* namespace dockpose::firmware */
