@@ -57,18 +57,43 @@ void downscaleBox(const ImageView &in, int factor, std::uint8_t *out, int out_wi
 				    static_cast<std::size_t>(out_width));
 		return;
 	}
-	const int area = factor * factor;
-	for (int y = 0; y < out_height; ++y) {
-		std::uint8_t *o = out + static_cast<std::ptrdiff_t>(y) * out_width;
-		for (int x = 0; x < out_width; ++x) {
-			int sum = 0;
-			for (int dy = 0; dy < factor; ++dy) {
-				const std::uint8_t *r = in.row(y * factor + dy) + x * factor;
-				for (int dx = 0; dx < factor; ++dx)
-					sum += r[dx];
-			}
-			o[x] = static_cast<std::uint8_t>((sum + area / 2) / area);
+	/* Factor 2, the common case, in two loops the compiler vectorises: the two rows' rounded
+	 * mean, then each pair's (the mean of the block to within one level). */
+	if (factor == 2) {
+		std::uint8_t rows[2 * kMaxPreviewWidth];
+		const int n = std::min(out_width, kMaxPreviewWidth);
+		for (int y = 0; y < out_height; ++y) {
+			const std::uint8_t *__restrict r0 = in.row(2 * y);
+			const std::uint8_t *__restrict r1 = in.row(2 * y + 1);
+			for (int x = 0; x < 2 * n; ++x)
+				rows[x] = static_cast<std::uint8_t>((r0[x] + r1[x] + 1) >> 1);
+			std::uint8_t *__restrict o =
+				out + static_cast<std::ptrdiff_t>(y) * out_width;
+			for (int x = 0; x < n; ++x)
+				o[x] = static_cast<std::uint8_t>(
+					(rows[2 * x] + rows[2 * x + 1] + 1) >> 1);
 		}
+		return;
+	}
+	/* Otherwise row by row into column sums, then the means. */
+	const std::uint32_t area =
+		static_cast<std::uint32_t>(factor) * static_cast<std::uint32_t>(factor);
+	std::uint32_t sums[kMaxPreviewWidth];
+	const int n = std::min(out_width, kMaxPreviewWidth);
+	for (int y = 0; y < out_height; ++y) {
+		std::fill(sums, sums + n, 0u);
+		for (int dy = 0; dy < factor; ++dy) {
+			const std::uint8_t *__restrict r = in.row(y * factor + dy);
+			for (int x = 0; x < n; ++x) {
+				std::uint32_t s = 0;
+				for (int dx = 0; dx < factor; ++dx)
+					s += r[x * factor + dx];
+				sums[x] += s;
+			}
+		}
+		std::uint8_t *__restrict o = out + static_cast<std::ptrdiff_t>(y) * out_width;
+		for (int x = 0; x < n; ++x)
+			o[x] = static_cast<std::uint8_t>((sums[x] + area / 2) / area);
 	}
 }
 
