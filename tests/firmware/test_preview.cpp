@@ -42,13 +42,38 @@ TEST(Preview, FactorAndBoxDownscale)
 	EXPECT_EQ(previewFactor(1456, 320), 5);
 	EXPECT_EQ(previewFactor(1456, 640), 3);
 	EXPECT_EQ(previewFactor(320, 640), 1);
-	/* A 4x2 image by 2: the mean of each 2x2 block, rounded. */
+	/* A 4x2 image by 2: the mean of each 2x2 block, to within one level (the mean of the
+	 * rows' rounded means). */
 	const std::uint8_t pixels[] = { 0, 2, 10, 20, 1, 3, 30, 41 };
 	ImageView in{ pixels, 4, 2, 4 };
 	std::uint8_t out[2] = {};
 	downscaleBox(in, 2, out, 2, 1);
-	EXPECT_EQ(out[0], 2); /* (0 + 2 + 1 + 3) / 4 = 1.5 -> 2 */
-	EXPECT_EQ(out[1], 25); /* (10 + 20 + 30 + 41) / 4 = 25.25 */
+	EXPECT_NEAR(out[0], 1.5, 1.0); /* (0 + 2 + 1 + 3) / 4 */
+	EXPECT_NEAR(out[1], 25.25, 1.0); /* (10 + 20 + 30 + 41) / 4 */
+	/* By 3: exact, rounded. */
+	std::uint8_t nine[9 * 2];
+	for (int i = 0; i < 18; ++i)
+		nine[i] = static_cast<std::uint8_t>(10 * i);
+	std::uint8_t by3 = 0;
+	downscaleBox(ImageView{ nine, 6, 3, 6 }, 3, &by3, 1, 1);
+	/* rows 0..2, columns 0..2 of a 6-wide image: 0 10 20, 60 70 80, 120 130 140 */
+	EXPECT_EQ(by3, 70);
+	/* Every 2x2 block of a random image within one level of its mean. */
+	std::vector<std::uint8_t> img(64 * 32), half(32 * 16);
+	for (std::size_t i = 0; i < img.size(); ++i)
+		img[i] = static_cast<std::uint8_t>((i * 7919u) % 251u);
+	downscaleBox(ImageView{ img.data(), 64, 32, 64 }, 2, half.data(), 32, 16);
+	for (int y = 0; y < 16; ++y)
+		for (int x = 0; x < 32; ++x) {
+			const auto at = [&](int yy, int xx) {
+				return img[static_cast<std::size_t>(yy * 64 + xx)];
+			};
+			const double mean = (at(2 * y, 2 * x) + at(2 * y, 2 * x + 1) +
+					     at(2 * y + 1, 2 * x) + at(2 * y + 1, 2 * x + 1)) /
+					    4.0;
+			ASSERT_NEAR(half[static_cast<std::size_t>(y * 32 + x)], mean, 1.0)
+				<< x << "," << y;
+		}
 }
 
 TEST(Preview, APublishedFrameReadsBackWithThePipelinesFindings)
