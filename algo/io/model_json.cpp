@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <regex>
 
 #include <nlohmann/json.hpp>
 
@@ -255,6 +256,44 @@ Status readApproach(const json &doc, const std::string &source, TargetModel *m)
 	return Status::ok();
 }
 
+/*
+ * Camera, the calibration's record (dockpose calibrate writes it; dockpose reads only
+ * "sigma", but the rest must be sane): "rms_px" >= 0, "frames" an integer >= 1, "date" an
+ * ISO 8601 date or date and time ("2026-12-03" or "2026-12-03T18:40:00Z", a UTC offset
+ * instead of Z, or none).
+ */
+Status readCalibrationRecord(const json &doc, const std::string &source)
+{
+	double rms_px = 0.0;
+	if (Status s = readNumber(doc, "rms_px", source, false, &rms_px); !s)
+		return s;
+	if (!(std::isfinite(rms_px) && rms_px >= 0.0))
+		return Status::error(source + ": 'rms_px' must be a reprojection rms >= 0 px, not " +
+				     doc["rms_px"].dump());
+	if (const auto frames = doc.find("frames"); frames != doc.end()) {
+		if (!frames->is_number_integer() && !frames->is_number_unsigned())
+			return Status::error(source + ": 'frames' must be an integer, not " +
+					     typeName(*frames));
+		if (frames->get<std::int64_t>() < 1)
+			return Status::error(source +
+					     ": 'frames' must be the number of frames calibrated "
+					     "from, >= 1, not " +
+					     frames->dump());
+	}
+	if (const auto date = doc.find("date"); date != doc.end()) {
+		/* YYYY-MM-DD, then optionally Thh:mm[:ss[.fff]] and Z or +hh:mm / -hh:mm. */
+		static const std::regex kIsoDate(
+			R"(\d{4}-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01]))"
+			R"((T([01]\d|2[0-3]):[0-5]\d(:[0-5]\d(\.\d+)?)?(Z|[+-]([01]\d|2[0-3]):?[0-5]\d)?)?)");
+		if (!date->is_string() || !std::regex_match(date->get<std::string>(), kIsoDate))
+			return Status::error(source +
+					     ": 'date' must be an ISO 8601 date (\"2026-12-03\" or "
+					     "\"2026-12-03T18:40:00Z\"), not " +
+					     date->dump());
+	}
+	return Status::ok();
+}
+
 struct Field {
 	const char *key;
 	double *value;
@@ -395,9 +434,7 @@ Result<CameraIntrinsics> parseCameraIntrinsics(const std::string &json_text,
 	}
 	if (Status s = readSigma(doc, source, &k); !s)
 		return s;
-	/* Written by calibration tools; dockpose does not use it, but it must be sane. */
-	double rms_px = 0.0;
-	if (Status s = readNumber(doc, "rms_px", source, false, &rms_px); !s)
+	if (Status s = readCalibrationRecord(doc, source); !s)
 		return s;
 
 	if (Status s = k.validate(); !s)
