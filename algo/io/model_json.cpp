@@ -268,7 +268,8 @@ Status readCalibrationRecord(const json &doc, const std::string &source)
 	if (Status s = readNumber(doc, "rms_px", source, false, &rms_px); !s)
 		return s;
 	if (!(std::isfinite(rms_px) && rms_px >= 0.0))
-		return Status::error(source + ": 'rms_px' must be a reprojection rms >= 0 px, not " +
+		return Status::error(source +
+				     ": 'rms_px' must be a reprojection rms >= 0 px, not " +
 				     doc["rms_px"].dump());
 	if (const auto frames = doc.find("frames"); frames != doc.end()) {
 		if (!frames->is_number_integer() && !frames->is_number_unsigned())

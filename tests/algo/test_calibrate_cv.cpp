@@ -56,14 +56,18 @@ struct Grid {
 	double spacing_mm = 20.0;
 	double dot_radius_mm = 4.0;
 
-	Eigen::Vector3d point(int i, int j) const { return { j * spacing_mm, i * spacing_mm, 0.0 }; }
+	Eigen::Vector3d point(int i, int j) const
+	{
+		return { j * spacing_mm, i * spacing_mm, 0.0 };
+	}
 	Eigen::Vector3d centre() const
 	{
 		return { 0.5 * (cols - 1) * spacing_mm, 0.5 * (rows - 1) * spacing_mm, 0.0 };
 	}
 	std::string json() const
 	{
-		return "{\"rows\": " + std::to_string(rows) + ", \"cols\": " + std::to_string(cols) +
+		return "{\"rows\": " + std::to_string(rows) +
+		       ", \"cols\": " + std::to_string(cols) +
 		       ", \"spacing_mm\": " + std::to_string(spacing_mm) +
 		       ", \"layout\": \"symmetric\"}";
 	}
@@ -76,8 +80,8 @@ using Extras = std::vector<Eigen::Vector3d>;
  * The grid seen from `pose` (grid plane -> camera), background 15 levels, dots 200 above it,
  * Gaussian read noise of noise_sigma levels. Allocates: the image.
  */
-Image renderGrid(const CameraModel &camera, const Grid &grid, const Pose &pose,
-		 double noise_sigma, std::uint64_t seed, const Extras &extras = {})
+Image renderGrid(const CameraModel &camera, const Grid &grid, const Pose &pose, double noise_sigma,
+		 std::uint64_t seed, const Extras &extras = {})
 {
 	const CameraIntrinsics &k = camera.intrinsics();
 	std::vector<double> level(static_cast<std::size_t>(k.width) * k.height, 0.0);
@@ -113,13 +117,15 @@ Image renderGrid(const CameraModel &camera, const Grid &grid, const Pose &pose,
 				int inside = 0;
 				for (int sy = 0; sy < kSub; ++sy)
 					for (int sx = 0; sx < kSub; ++sx) {
-						const Eigen::Vector2d uv(x - 0.5 + (sx + 0.5) / kSub,
-									 y - 0.5 + (sy + 0.5) / kSub);
+						const Eigen::Vector2d uv(
+							x - 0.5 + (sx + 0.5) / kSub,
+							y - 0.5 + (sy + 0.5) / kSub);
 						Eigen::Vector2d xy;
 						if (!camera.pixelToNormalized(uv, &xy))
 							continue;
 						const Eigen::Vector3d ray(xy.x(), xy.y(), 1.0);
-						const double s = normal.dot(pose.t_mm) / normal.dot(ray);
+						const double s =
+							normal.dot(pose.t_mm) / normal.dot(ray);
 						const Eigen::Vector3d on_plane =
 							pose.R.transpose() * (s * ray - pose.t_mm);
 						inside += (on_plane - dot).head<2>().norm() <=
@@ -135,7 +141,8 @@ Image renderGrid(const CameraModel &camera, const Grid &grid, const Pose &pose,
 		for (int x = 0; x < k.width; ++x) {
 			const double v = 15.0 + level[static_cast<std::size_t>(y) * k.width + x] +
 					 noise_sigma * rng.normal();
-			image.at(x, y) = static_cast<std::uint8_t>(std::clamp(std::lround(v), 0L, 255L));
+			image.at(x, y) =
+				static_cast<std::uint8_t>(std::clamp(std::lround(v), 0L, 255L));
 		}
 	return image;
 }
@@ -182,7 +189,8 @@ Pose calibrationView(const CameraModel &camera, const Grid &grid, int n, Rng *rn
 		const double v = k.height * (place[1] + pull * (0.5 - place[1]));
 		Eigen::Vector2d xy;
 		EXPECT_TRUE(camera.pixelToNormalized({ u, v }, &xy));
-		const Eigen::Vector3d aim = range_mm * Eigen::Vector3d(xy.x(), xy.y(), 1.0).normalized();
+		const Eigen::Vector3d aim =
+			range_mm * Eigen::Vector3d(xy.x(), xy.y(), 1.0).normalized();
 		/* Tilted from facing the camera along the line of sight to its centre. */
 		Pose pose;
 		pose.R = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), aim)
@@ -268,8 +276,9 @@ protected:
 		std::vector<std::string> paths;
 		for (int n = 0; n < 15; ++n) {
 			const Pose pose = calibrationView(camera, grid_, n, &rng);
-			paths.push_back(write(stem + "-" + std::to_string(n) + ".pgm",
-					      renderGrid(camera, grid_, pose, 2.0, seed * 100 + n)));
+			paths.push_back(
+				write(stem + "-" + std::to_string(n) + ".pgm",
+				      renderGrid(camera, grid_, pose, 2.0, seed * 100 + n)));
 		}
 		return paths;
 	}

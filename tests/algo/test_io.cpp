@@ -501,11 +501,12 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 	/* What dockpose calibrate writes: a UTC date and time; an offset is ISO 8601 too. */
 	for (const char *date : { "2026-12-03T18:40:00Z", "2026-12-03T18:40:00+01:00",
 				  "2026-12-03T18:40", "2026-12-03T18:40:00.25Z" })
-		EXPECT_TRUE(parseCameraIntrinsics(
-				    R"({"width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320,
+		EXPECT_TRUE(
+			parseCameraIntrinsics(
+				R"({"width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320,
 				    "cy": 240, "frames": 1, "date": ")" +
-				    std::string(date) + "\"}")
-				    .isOk())
+				std::string(date) + "\"}")
+				.isOk())
 			<< date;
 
 	const std::vector<BadCase> targets = {

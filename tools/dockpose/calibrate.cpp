@@ -70,8 +70,7 @@ Status readGridInt(const json &doc, const char *key, const std::string &source, 
 				     typeName(*it));
 	const auto value = it->get<long long>();
 	if (value < 2 || value > 1000)
-		return Status::error(source + ": '" + key + "' must be 2..1000, not " +
-				     it->dump());
+		return Status::error(source + ": '" + key + "' must be 2..1000, not " + it->dump());
 	*out = static_cast<int>(value);
 	return Status::ok();
 }
@@ -120,8 +119,7 @@ public:
 		: keypoints_(std::move(keypoints))
 	{
 	}
-	void detect(cv::InputArray, std::vector<cv::KeyPoint> &keypoints,
-		    cv::InputArray) override
+	void detect(cv::InputArray, std::vector<cv::KeyPoint> &keypoints, cv::InputArray) override
 	{
 		keypoints = keypoints_;
 	}
@@ -202,10 +200,10 @@ void reportCoverage(const std::vector<Frame> &frames, cv::Size size, double cx, 
 	for (const Frame &f : frames)
 		for (const cv::Point2f &p : f.centres) {
 			const double x = p.x, y = p.y;
-			const int c = std::clamp(static_cast<int>(x * kCoverageCells / size.width), 0,
-						 kCoverageCells - 1);
-			const int r = std::clamp(static_cast<int>(y * kCoverageCells / size.height), 0,
-						 kCoverageCells - 1);
+			const int c = std::clamp(static_cast<int>(x * kCoverageCells / size.width),
+						 0, kCoverageCells - 1);
+			const int r = std::clamp(static_cast<int>(y * kCoverageCells / size.height),
+						 0, kCoverageCells - 1);
 			++cells[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)];
 			reach_px = std::max(reach_px, std::hypot(x - cx, y - cy));
 		}
@@ -219,7 +217,8 @@ void reportCoverage(const std::vector<Frame> &frames, cv::Size size, double cx, 
 		for (int c = 0; c < kCoverageCells; ++c) {
 			const bool border = r == 0 || c == 0 || r == kCoverageCells - 1 ||
 					    c == kCoverageCells - 1;
-			if (!border || cells[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)])
+			if (!border ||
+			    cells[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)])
 				continue;
 			empty += (empty.empty() ? "" : " ") + std::string("(row ") +
 				 std::to_string(r) + ", col " + std::to_string(c) + ")";
@@ -249,7 +248,7 @@ std::vector<Eigen::Vector3d> GridSpec::points() const
 	for (int i = 0; i < rows; ++i)
 		for (int j = 0; j < cols; ++j) {
 			const double x = layout == Layout::Symmetric ? j * spacing_mm
-								      : (2 * j + i % 2) * spacing_mm;
+								     : (2 * j + i % 2) * spacing_mm;
 			out.emplace_back(x, i * spacing_mm, 0.0);
 		}
 	return out;
@@ -296,18 +295,20 @@ Result<GridSpec> parseGridSpec(const std::string &json_text, const std::string &
 	const auto layout = doc.find("layout");
 	if (layout != doc.end()) {
 		if (!layout->is_string())
-			return Status::error(source +
-					     ": 'layout' must be \"symmetric\" or \"asymmetric\", not " +
-					     typeName(*layout));
+			return Status::error(
+				source +
+				": 'layout' must be \"symmetric\" or \"asymmetric\", not " +
+				typeName(*layout));
 		const std::string name = layout->get<std::string>();
 		if (name == "symmetric")
 			grid.layout = GridSpec::Layout::Symmetric;
 		else if (name == "asymmetric")
 			grid.layout = GridSpec::Layout::Asymmetric;
 		else
-			return Status::error(source +
-					     ": 'layout' must be \"symmetric\" or \"asymmetric\", not \"" +
-					     name + "\"");
+			return Status::error(
+				source +
+				": 'layout' must be \"symmetric\" or \"asymmetric\", not \"" +
+				name + "\"");
 	}
 	if (grid.layout == GridSpec::Layout::Symmetric && grid.rows == grid.cols)
 		return Status::error(source + ": a symmetric grid needs rows != cols (" +
@@ -350,22 +351,23 @@ int runCalibrate(const CalibrateArgs &args)
 		const ImageView view = image->view();
 		if (!detector) {
 			size = cv::Size(view.width, view.height);
-			detector = std::make_unique<BlobDetector>(view.width, view.height,
-								  ThresholdConfig{},
-								  BlobFilterConfig{});
+			detector = std::make_unique<BlobDetector>(
+				view.width, view.height, ThresholdConfig{}, BlobFilterConfig{});
 		} else if (view.width != size.width || view.height != size.height) {
-			std::fprintf(stderr,
-				     "dockpose calibrate: %s: skipped: %dx%d, not the first image's "
-				     "%dx%d\n",
-				     path.c_str(), view.width, view.height, size.width, size.height);
+			std::fprintf(
+				stderr,
+				"dockpose calibrate: %s: skipped: %dx%d, not the first image's "
+				"%dx%d\n",
+				path.c_str(), view.width, view.height, size.width, size.height);
 			continue;
 		}
 		Dots dots = findDots(detector.get(), view, grid);
 		if (dots.overflow) {
-			std::fprintf(stderr,
-				     "dockpose calibrate: %s: skipped: too many bright components to "
-				     "label (%d): not a grid on a dark background\n",
-				     path.c_str(), dots.components);
+			std::fprintf(
+				stderr,
+				"dockpose calibrate: %s: skipped: too many bright components to "
+				"label (%d): not a grid on a dark background\n",
+				path.c_str(), dots.components);
 			continue;
 		}
 		const std::size_t found = dots.keypoints.size();
@@ -384,10 +386,9 @@ int runCalibrate(const CalibrateArgs &args)
 			cv::makePtr<CentroidFeeder>(std::move(dots.keypoints));
 		/* OpenCV's grid finder first (tolerates extra blobs), then its clustering
 		 * (tolerates stronger perspective and distortion, but not blobs among the dots). */
-		const bool ordered =
-			cv::findCirclesGrid(mat, pattern, centres, flags, feeder) ||
-			cv::findCirclesGrid(mat, pattern, centres, flags | cv::CALIB_CB_CLUSTERING,
-					    feeder);
+		const bool ordered = cv::findCirclesGrid(mat, pattern, centres, flags, feeder) ||
+				     cv::findCirclesGrid(mat, pattern, centres,
+							 flags | cv::CALIB_CB_CLUSTERING, feeder);
 		if (!ordered || centres.size() != static_cast<std::size_t>(grid.count())) {
 			std::fprintf(stderr,
 				     "dockpose calibrate: %s: skipped: %zu dots found but no %dx%d "
@@ -415,9 +416,10 @@ int runCalibrate(const CalibrateArgs &args)
 		std::vector<Frame> kept;
 		for (Frame &f : frames) {
 			if (f.rms_px > limit)
-				std::printf("dropped %s: rms %.3f px > %.0f x the median (%.3f px)\n",
-					    f.path.c_str(), f.rms_px, kOutlierFactor,
-					    limit / kOutlierFactor);
+				std::printf(
+					"dropped %s: rms %.3f px > %.0f x the median (%.3f px)\n",
+					f.path.c_str(), f.rms_px, kOutlierFactor,
+					limit / kOutlierFactor);
 			else
 				kept.push_back(std::move(f));
 		}
@@ -467,14 +469,15 @@ int runCalibrate(const CalibrateArgs &args)
 	std::printf("%zu frame(s) used of %zu image(s); rms %.3f px\n", frames.size(),
 		    args.images.size(), s.rms_px);
 	for (const Parameter &p : parameters)
-		std::printf("  %s = %s +- %s (1 sigma)\n", p.name, fixed(p.value, p.decimals).c_str(),
-			    fixed(p.sigma, p.decimals).c_str());
+		std::printf("  %s = %s +- %s (1 sigma)\n", p.name,
+			    fixed(p.value, p.decimals).c_str(), fixed(p.sigma, p.decimals).c_str());
 	reportCoverage(frames, size, k.cx, k.cy);
 	if (static_cast<int>(frames.size()) < kFewFrames)
 		std::printf("warning: %zu frames; with fewer than %d the 1 sigmas are optimistic\n",
 			    frames.size(), kFewFrames);
 	if (Status v = k.validate(); !v) {
-		std::fprintf(stderr, "dockpose calibrate: the solution is not a usable camera: %s\n",
+		std::fprintf(stderr,
+			     "dockpose calibrate: the solution is not a usable camera: %s\n",
 			     v.message().c_str());
 		return 1;
 	}

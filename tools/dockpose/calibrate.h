@@ -39,7 +39,10 @@
 namespace dockpose::tool {
 
 struct GridSpec {
-	enum class Layout { Symmetric, Asymmetric };
+	enum class Layout {
+		Symmetric,
+		Asymmetric
+	};
 	int rows = 0;
 	int cols = 0;
 	double spacing_mm = 0.0;
