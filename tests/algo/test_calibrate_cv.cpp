@@ -173,7 +173,8 @@ bool gridInFrame(const CameraModel &camera, const Grid &grid, const Pose &pose, 
  * of the frame (corners, edges, centre) and at a range where it spans about 45 % of the
  * frame's width; pulled towards the centre until every dot is 10 px inside the frame.
  */
-Pose calibrationView(const CameraModel &camera, const Grid &grid, int n, Rng *rng)
+Pose calibrationView(const CameraModel &camera, const Grid &grid, int n, Rng *rng,
+		     bool centre_only = false)
 {
 	const CameraIntrinsics &k = camera.intrinsics();
 	static const double kPlaces[9][2] = { { 0.15, 0.15 }, { 0.85, 0.15 }, { 0.15, 0.85 },
@@ -190,7 +191,7 @@ Pose calibrationView(const CameraModel &camera, const Grid &grid, int n, Rng *rn
 			.toRotationMatrix();
 	const double width_mm = (grid.cols - 1) * grid.spacing_mm;
 	const double range_mm = k.fx * width_mm / (0.45 * k.width) * rng->uniform(0.9, 1.15);
-	const double *place = kPlaces[n % 9];
+	const double *place = kPlaces[centre_only ? 8 : n % 9];
 	for (double pull = 0.0; pull <= 1.0; pull += 0.05) {
 		const double u = k.width * (place[0] + pull * (0.5 - place[0]));
 		const double v = k.height * (place[1] + pull * (0.5 - place[1]));
@@ -276,13 +277,13 @@ protected:
 
 	/* 15 views of the grid through the lens, 2 levels of noise. */
 	std::vector<std::string> renderSet(const CameraIntrinsics &k, const std::string &stem,
-					   std::uint64_t seed)
+					   std::uint64_t seed, bool centre_only = false)
 	{
 		const CameraModel camera(k);
 		Rng rng(seed);
 		std::vector<std::string> paths;
 		for (int n = 0; n < 15; ++n) {
-			const Pose pose = calibrationView(camera, grid_, n, &rng);
+			const Pose pose = calibrationView(camera, grid_, n, &rng, centre_only);
 			paths.push_back(
 				write(stem + "-" + std::to_string(n) + ".pgm",
 				      renderGrid(camera, grid_, pose, 2.0, seed * 100 + n)));
@@ -458,6 +459,49 @@ TEST_F(Calibrate, SkipsAFrameWithoutTheWholeGridAndKeepsOneWithExtraBlobs)
 	EXPECT_EQ(err.find("extra.pgm"), std::string::npos) << err;
 	EXPECT_NE(report.find("extra.pgm: 70 dots"), std::string::npos) << report;
 	ASSERT_TRUE(loadCameraIntrinsics(dir_ + "/camera.json").isOk());
+}
+
+TEST_F(Calibrate, DropsAFrameOfAnotherLensAndSaysSo)
+{
+	const CameraIntrinsics k = lens(640, 480, 600.0, 600.0, 320.0, 240.0, -0.2, 0.05, 0, 0);
+	std::vector<std::string> images = renderSet(k, "set", 8);
+	/* The same grid through a lens with 5 % more focal length and other distortion: no
+	 * extrinsics fit it with the others' intrinsics. */
+	CameraIntrinsics other = k;
+	other.fx *= 1.05;
+	other.fy *= 1.05;
+	other.k1 = -0.1;
+	Rng rng(2);
+	const CameraModel other_camera(other);
+	images.push_back(write("other.pgm",
+			       renderGrid(other_camera, grid_,
+					  calibrationView(other_camera, grid_, 3, &rng), 2.0, 4)));
+	std::string report, err;
+	ASSERT_EQ(calibrate(images, dir_ + "/camera.json", &report, &err), 0) << err << report;
+	EXPECT_NE(report.find("dropped " + dir_ + "/other.pgm: rms "), std::string::npos) << report;
+	EXPECT_EQ(report.find("frame " + dir_ + "/other.pgm"), std::string::npos) << report;
+	EXPECT_NE(report.find("15 frame(s) used of 16 image(s)"), std::string::npos) << report;
+	const Result<CameraIntrinsics> got = loadCameraIntrinsics(dir_ + "/camera.json");
+	ASSERT_TRUE(got.isOk());
+	EXPECT_NEAR(got.value().fx / k.fx, 1.0, 0.003) << report;
+}
+
+TEST_F(Calibrate, WarnsWhenTheDotsLeaveTheCornersUncovered)
+{
+	const CameraIntrinsics k = lens(640, 480, 600.0, 600.0, 320.0, 240.0, -0.2, 0.05, 0, 0);
+	std::string report, err;
+	ASSERT_EQ(calibrate(renderSet(k, "centre", 6, true), dir_ + "/camera.json", &report, &err),
+		  0)
+		<< err << report;
+	EXPECT_NE(report.find("warning: no dot in the border cell(s) (row 0, col 0)"),
+		  std::string::npos)
+		<< report;
+	EXPECT_NE(report.find("warning: the dots reach only"), std::string::npos) << report;
+
+	/* The views spread over the frame: no warning. */
+	ASSERT_EQ(calibrate(renderSet(k, "spread", 6), dir_ + "/camera.json", &report, &err), 0)
+		<< err << report;
+	EXPECT_EQ(report.find("warning"), std::string::npos) << report;
 }
 
 TEST_F(Calibrate, BadGridFilesAreRefusedNamingTheKey)
