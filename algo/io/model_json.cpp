@@ -283,10 +283,10 @@ Status readCalibrationRecord(const json &doc, const std::string &source)
 	}
 	if (const auto date = doc.find("date"); date != doc.end()) {
 		/* YYYY-MM-DD, then optionally Thh:mm[:ss[.fff]] and Z or +hh:mm / -hh:mm. */
-		static const std::regex kIsoDate(
+		static const std::regex iso_date(
 			R"(\d{4}-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01]))"
 			R"((T([01]\d|2[0-3]):[0-5]\d(:[0-5]\d(\.\d+)?)?(Z|[+-]([01]\d|2[0-3]):?[0-5]\d)?)?)");
-		if (!date->is_string() || !std::regex_match(date->get<std::string>(), kIsoDate))
+		if (!date->is_string() || !std::regex_match(date->get<std::string>(), iso_date))
 			return Status::error(source +
 					     ": 'date' must be an ISO 8601 date (\"2026-12-03\" or "
 					     "\"2026-12-03T18:40:00Z\"), not " +
