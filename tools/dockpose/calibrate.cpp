@@ -9,6 +9,7 @@
 #include <exception>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <sstream>
 #include <utility>
 
@@ -296,8 +297,7 @@ Result<GridSpec> parseGridSpec(const std::string &json_text, const std::string &
 	if (layout != doc.end()) {
 		if (!layout->is_string())
 			return Status::error(
-				source +
-				": 'layout' must be \"symmetric\" or \"asymmetric\", not " +
+				source + R"(: 'layout' must be "symmetric" or "asymmetric", not )" +
 				typeName(*layout));
 		const std::string name = layout->get<std::string>();
 		if (name == "symmetric")
@@ -307,8 +307,8 @@ Result<GridSpec> parseGridSpec(const std::string &json_text, const std::string &
 		else
 			return Status::error(
 				source +
-				": 'layout' must be \"symmetric\" or \"asymmetric\", not \"" +
-				name + "\"");
+				R"(: 'layout' must be "symmetric" or "asymmetric", not ")" + name +
+				"\"");
 	}
 	if (grid.layout == GridSpec::Layout::Symmetric && grid.rows == grid.cols)
 		return Status::error(source + ": a symmetric grid needs rows != cols (" +
@@ -382,8 +382,8 @@ int runCalibrate(const CalibrateArgs &args)
 				  const_cast<std::uint8_t *>(view.data),
 				  static_cast<std::size_t>(view.stride_bytes));
 		std::vector<cv::Point2f> centres;
-		const cv::Ptr<cv::FeatureDetector> feeder =
-			cv::makePtr<CentroidFeeder>(std::move(dots.keypoints));
+		const cv::Ptr<cv::FeatureDetector> feeder(
+			std::make_shared<CentroidFeeder>(std::move(dots.keypoints)));
 		/* OpenCV's grid finder first (tolerates extra blobs), then its clustering
 		 * (tolerates stronger perspective and distortion, but not blobs among the dots). */
 		const bool ordered = cv::findCirclesGrid(mat, pattern, centres, flags, feeder) ||
@@ -408,8 +408,9 @@ int runCalibrate(const CalibrateArgs &args)
 	}
 
 	Solution s = solve(grid, &frames, size);
-	for (int round = 0; round < 5; ++round) {
+	for (int round = 0; round < kMaxOutlierRounds; ++round) {
 		std::vector<double> rms;
+		rms.reserve(frames.size());
 		for (const Frame &f : frames)
 			rms.push_back(f.rms_px);
 		const double limit = kOutlierFactor * median(rms);

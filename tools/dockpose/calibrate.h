@@ -14,7 +14,8 @@
  *    findCirclesGrid fed those centroids as keypoints (extra blobs and perspective
  *    are tolerated); a frame without the whole grid is skipped with a line on stderr;
  *  - OpenCV's calibrateCamera solves the intrinsics and every frame's extrinsics; frames
- *    whose rms exceeds kOutlierFactor x the median are dropped and it solves again;
+ *    whose rms exceeds kOutlierFactor x the median are dropped and it solves again (until
+ *    none is dropped, at most kMaxOutlierRounds times);
  *  - the report (stdout): per-frame rms, dropped frames, each parameter with its 1 sigma,
  *    and a warning when the dots leave corners or edges of the image uncovered;
  *  - CAMERA.json: the camera file (algo/io/model_json.h) with "rms_px", "sigma",
@@ -67,6 +68,8 @@ struct CalibrateArgs {
 
 /* A frame whose reprojection rms exceeds this many times the median frame's is dropped. */
 inline constexpr double kOutlierFactor = 3.0;
+/* Dropping and solving again stops after this many rounds (each drops at least a frame). */
+inline constexpr int kMaxOutlierRounds = 5;
 /* Fewer frames with the grid than this: no calibration (exit 1). */
 inline constexpr int kMinFrames = 4;
 

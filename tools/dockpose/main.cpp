@@ -355,7 +355,7 @@ CLI::App *addCalibrateCommand(CLI::App *app, dockpose::tool::CalibrateArgs *args
 	CLI::App *cmd = app->add_subcommand(
 		"calibrate", "Camera intrinsics (camera file) from PGM frames of a dot grid.");
 	cmd->add_option("--grid", args->grid_path,
-			"Grid file: {\"rows\", \"cols\", \"spacing_mm\", \"layout\"}")
+			R"(Grid file: {"rows", "cols", "spacing_mm", "layout"})")
 		->required();
 	cmd->add_option("-o,--output", args->output_path, "Camera file to write (CAMERA.json)")
 		->required();
