@@ -62,21 +62,30 @@ struct Grid {
 	 * (docs/calibration.md: dots at most a quarter of the pitch).
 	 */
 	double dot_radius_mm = 2.5;
+	/* OpenCV's asymmetric circle grid: row i shifted by i % 2 spacings, 2 spacings apart
+	 * along a row (calibrate.h). */
+	bool asymmetric = false;
 
 	Eigen::Vector3d point(int i, int j) const
 	{
-		return { j * spacing_mm, i * spacing_mm, 0.0 };
+		const double x = asymmetric ? (2 * j + i % 2) * spacing_mm : j * spacing_mm;
+		return { x, i * spacing_mm, 0.0 };
+	}
+	/* Width of the grid along its rows, mm. */
+	double widthMm() const
+	{
+		return asymmetric ? (2 * (cols - 1) + 1) * spacing_mm : (cols - 1) * spacing_mm;
 	}
 	Eigen::Vector3d centre() const
 	{
-		return { 0.5 * (cols - 1) * spacing_mm, 0.5 * (rows - 1) * spacing_mm, 0.0 };
+		return { 0.5 * widthMm(), 0.5 * (rows - 1) * spacing_mm, 0.0 };
 	}
 	std::string json() const
 	{
 		return "{\"rows\": " + std::to_string(rows) +
 		       ", \"cols\": " + std::to_string(cols) +
-		       ", \"spacing_mm\": " + std::to_string(spacing_mm) +
-		       ", \"layout\": \"symmetric\"}";
+		       ", \"spacing_mm\": " + std::to_string(spacing_mm) + ", \"layout\": \"" +
+		       (asymmetric ? "asymmetric" : "symmetric") + "\"}";
 	}
 };
 
@@ -171,7 +180,7 @@ bool gridInFrame(const CameraModel &camera, const Grid &grid, const Pose &pose, 
  * View n of a calibration set: the grid tilted by 30-45 degrees from facing the camera
  * (about an axis in its plane, a direction that turns from view to view), rolled, its centre aimed at one of nine places
  * of the frame (corners, edges, centre) and at a range where it spans about 45 % of the
- * frame's width; pulled towards the centre until every dot is 10 px inside the frame.
+ * frame's width or height; pulled towards the centre until every dot is 10 px inside the frame.
  */
 Pose calibrationView(const CameraModel &camera, const Grid &grid, int n, Rng *rng,
 		     bool centre_only = false)
@@ -189,8 +198,11 @@ Pose calibrationView(const CameraModel &camera, const Grid &grid, int n, Rng *rn
 		(Eigen::AngleAxisd(roll_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()) *
 		 Eigen::AngleAxisd(tilt_deg * M_PI / 180.0, axis))
 			.toRotationMatrix();
-	const double width_mm = (grid.cols - 1) * grid.spacing_mm;
-	const double range_mm = k.fx * width_mm / (0.45 * k.width) * rng->uniform(0.9, 1.15);
+	const double width_mm = grid.widthMm();
+	const double height_mm = (grid.rows - 1) * grid.spacing_mm;
+	const double range_mm =
+		k.fx * std::max(width_mm / (0.45 * k.width), height_mm / (0.45 * k.height)) *
+		rng->uniform(0.9, 1.15);
 	const double *place = kPlaces[centre_only ? 8 : n % 9];
 	for (double pull = 0.0; pull <= 1.0; pull += 0.05) {
 		const double u = k.width * (place[0] + pull * (0.5 - place[0]));
@@ -502,6 +514,30 @@ TEST_F(Calibrate, WarnsWhenTheDotsLeaveTheCornersUncovered)
 	ASSERT_EQ(calibrate(renderSet(k, "spread", 6), dir_ + "/camera.json", &report, &err), 0)
 		<< err << report;
 	EXPECT_EQ(report.find("warning"), std::string::npos) << report;
+}
+
+TEST_F(Calibrate, AnAsymmetricGridToo)
+{
+	/* OpenCV's usual 4 x 11 asymmetric grid; nearest dots sqrt(2) x 10 mm apart, 3.5 mm dots. */
+	grid_.rows = 11;
+	grid_.cols = 4;
+	grid_.spacing_mm = 10.0;
+	grid_.dot_radius_mm = 1.75;
+	grid_.asymmetric = true;
+	std::ofstream(dir_ + "/grid.json") << grid_.json();
+	const CameraIntrinsics k =
+		lens(1456, 1088, 1200.0, 1201.0, 735.0, 540.0, -0.25, 0.1, 0.0003, 0.0002);
+	std::string report, err;
+	ASSERT_EQ(calibrate(renderSet(k, "asym", 31), dir_ + "/camera.json", &report, &err), 0)
+		<< err << report;
+	EXPECT_EQ(err.find("skipped"), std::string::npos) << err;
+	const Result<CameraIntrinsics> got = loadCameraIntrinsics(dir_ + "/camera.json");
+	ASSERT_TRUE(got.isOk()) << got.message();
+	EXPECT_NEAR(got.value().fx / k.fx, 1.0, 0.003) << report;
+	EXPECT_NEAR(got.value().fy / k.fy, 1.0, 0.003) << report;
+	EXPECT_NEAR(got.value().cx, k.cx, 2.0) << report;
+	EXPECT_NEAR(got.value().cy, k.cy, 2.0) << report;
+	EXPECT_NEAR(got.value().k1, k.k1, 0.01) << report;
 }
 
 TEST_F(Calibrate, BadGridFilesAreRefusedNamingTheKey)
