@@ -9,7 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <regex>
+#include <string_view>
 
 #include <nlohmann/json.hpp>
 
@@ -256,6 +256,67 @@ Status readApproach(const json &doc, const std::string &source, TargetModel *m)
 	return Status::ok();
 }
 
+/* n decimal digits at text[*i] with a value in [lo, hi]; *i moves past them. */
+bool readDigits(std::string_view text, std::size_t *i, int n, int lo, int hi)
+{
+	if (text.size() < *i + static_cast<std::size_t>(n))
+		return false;
+	int value = 0;
+	for (int k = 0; k < n; ++k) {
+		const char c = text[(*i)++];
+		if (c < '0' || c > '9')
+			return false;
+		value = value * 10 + (c - '0');
+	}
+	return value >= lo && value <= hi;
+}
+
+/*
+ * ISO 8601 as calibration tools write it: YYYY-MM-DD, then optionally Thh:mm[:ss[.fff]] and
+ * Z or +hh:mm / -hh:mm (or +hhmm). Hand-written, not std::regex: libstdc++'s regex recurses
+ * per character and a long string would exhaust the stack.
+ */
+bool isIsoDate(std::string_view text)
+{
+	std::size_t i = 0;
+	const auto expect = [&](char c) {
+		return i < text.size() && text[i++] == c;
+	};
+	if (!readDigits(text, &i, 4, 0, 9999) || !expect('-') || !readDigits(text, &i, 2, 1, 12) ||
+	    !expect('-') || !readDigits(text, &i, 2, 1, 31))
+		return false;
+	if (i == text.size())
+		return true;
+	if (!expect('T') || !readDigits(text, &i, 2, 0, 23) || !expect(':') ||
+	    !readDigits(text, &i, 2, 0, 59))
+		return false;
+	if (i < text.size() && text[i] == ':') {
+		++i;
+		if (!readDigits(text, &i, 2, 0, 59))
+			return false;
+		if (i < text.size() && text[i] == '.') {
+			++i;
+			const std::size_t first = i;
+			while (i < text.size() && text[i] >= '0' && text[i] <= '9')
+				++i;
+			if (i == first)
+				return false;
+		}
+	}
+	if (i == text.size())
+		return true;
+	if (text[i] == 'Z')
+		return i + 1 == text.size();
+	if (text[i] != '+' && text[i] != '-')
+		return false;
+	++i;
+	if (!readDigits(text, &i, 2, 0, 23))
+		return false;
+	if (i < text.size() && text[i] == ':')
+		++i;
+	return readDigits(text, &i, 2, 0, 59) && i == text.size();
+}
+
 /*
  * Camera, the calibration's record (dockpose calibrate writes it; dockpose reads only
  * "sigma", but the rest must be sane): "rms_px" >= 0, "frames" an integer >= 1, "date" an
@@ -282,11 +343,7 @@ Status readCalibrationRecord(const json &doc, const std::string &source)
 					     frames->dump());
 	}
 	if (const auto date = doc.find("date"); date != doc.end()) {
-		/* YYYY-MM-DD, then optionally Thh:mm[:ss[.fff]] and Z or +hh:mm / -hh:mm. */
-		static const std::regex iso_date(
-			R"(\d{4}-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01]))"
-			R"((T([01]\d|2[0-3]):[0-5]\d(:[0-5]\d(\.\d+)?)?(Z|[+-]([01]\d|2[0-3]):?[0-5]\d)?)?)");
-		if (!date->is_string() || !std::regex_match(date->get<std::string>(), iso_date))
+		if (!date->is_string() || !isIsoDate(date->get<std::string>()))
 			return Status::error(source +
 					     ": 'date' must be an ISO 8601 date (\"2026-12-03\" or "
 					     "\"2026-12-03T18:40:00Z\"), not " +

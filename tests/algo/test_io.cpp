@@ -508,6 +508,11 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 				std::string(date) + "\"}")
 				.isOk())
 			<< date;
+	/* A very long "date" is refused, not a stack overflow (the check is not a std::regex). */
+	EXPECT_FALSE(parseCameraIntrinsics(R"({"width": 640, "height": 480, "fx": 500, "fy": 500,
+					       "cx": 320, "cy": 240, "date": "2026-12-03T)" +
+					   std::string(200000, '1') + "\"}")
+			     .isOk());
 
 	const std::vector<BadCase> targets = {
 		{ "negative tolerance", "{" + square + R"(, "led_sigma_mm": -1})",
