@@ -21,9 +21,9 @@
  *  - CAMERA.json: the camera file (algo/io/model_json.h) with "rms_px", "sigma",
  *    "frames" and "date".
  *
- * Exit status: 0 written; 1 no calibration (an image unreadable, too few frames with the
- * grid, a solution that fails the camera file's checks, the file not written); 2 a bad
- * command line or grid file.
+ * Exit status: 0 written; 1 an image could not be read (the others are used and the file is
+ * still written), or no calibration (too few frames with the grid, a solution that fails the
+ * camera file's checks, the file not written); 2 a bad command line or grid file.
  *
  * Host only (OpenCV: this file is built only where OpenCV is found). Allocates freely;
  * one thread.
