@@ -304,6 +304,8 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 
 	/* Lit, unlit or mixed: the strobe's history against the exposure window. */
 	const hal::Lighting lighting = classifyLighting(frame);
+	if (frame_tap_)
+		frame_tap_->onFrame(frame, lighting);
 
 	/* What the pipeline reads in this strobe mode (alternate: lit − last unlit); nothing: the
 	 * frame gives no report. */

@@ -36,6 +36,7 @@
 #include "algo/pipeline.h"
 #include "board/board.h"
 #include "firmware/alternate_strobe.h"
+#include "firmware/capture.h"
 #include "firmware/config.h"
 #include "firmware/fault_hold.h"
 #include "firmware/latency_histogram.h"
@@ -103,6 +104,9 @@ public:
 	StrobeMode strobeMode() const { return strobe_mode_; }
 	bool enabled() const { return enabled_; }
 	hal::Strobe *strobe() const { return backends_.strobe.get(); }
+	/* Every accepted frame (camera model's size) also goes to *tap, on the frame thread,
+	 * before the pipeline; null: none. Set before run(). --capture's FrameCapture. */
+	void setFrameTap(FrameTap *tap) { frame_tap_ = tap; }
 
 	/* One line of totals (frames, poses, rate, latency, drops) for logs. */
 	void printSummary(std::FILE *out) const;
@@ -197,6 +201,7 @@ private:
 
 	bool started_ = false;
 	bool shut_down_ = false;
+	FrameTap *frame_tap_ = nullptr;
 };
 
 } /* namespace dockpose::firmware */

@@ -3,6 +3,12 @@
  * dockposed: the docking-sensor daemon.
  *
  *   dockposed --board board/sim/board.json [--for SECONDS] [--can-log FILE] [--startup-timeout S]
+ *   dockposed --board B --capture DIR --frames N [--every K]
+ *
+ * --capture runs the sensor as usual and writes N frames (every Kth) to DIR as PGM
+ * (firmware/capture.h), then shuts down as on SIGTERM (LED off) and exits 0; a directory
+ * that cannot be made or written is a bad command line (2), a write that fails later or a
+ * camera that ends before N frames exits 1.
  *
  * Exit status: 0 after a clean run (SIGTERM/SIGINT, --for elapsed, replay
  * finished), 1 when the hardware failed (a backend could not start, the camera
@@ -26,6 +32,7 @@
 #include <CLI/CLI.hpp>
 
 #include "board/board.h"
+#include "firmware/capture.h"
 #include "firmware/config.h"
 #include "firmware/config_table.h"
 #include "firmware/daemon.h"
@@ -191,6 +198,9 @@ struct Options {
 	double run_for_s = 0.0;
 	std::string can_log;
 	int startup_timeout_s = kDefaultStartupTimeoutS;
+	std::string capture_dir; /* empty: no capture */
+	int capture_frames = 0;
+	int capture_every = 1;
 };
 
 /* Parse the command line into *options: -1 to go on, else the exit status (--help: 0, bad: 2). */
@@ -211,6 +221,18 @@ int parseOptions(int argc, char **argv, Options *options)
 		   "--startup-timeout", options->startup_timeout_s,
 		   "seconds the backends may take to open and start before dockposed gives up (exit 75)")
 		->check(CLI::Range(1, 600))
+		->capture_default_str();
+	CLI::Option *capture = app.add_option(
+		"--capture", options->capture_dir,
+		"write camera frames to this directory as PGM (made if missing), then exit");
+	app.add_option("--frames", options->capture_frames, "--capture: how many frames to write")
+		->check(CLI::Range(1, 1000000))
+		->needs(capture);
+	capture->needs(app.get_option("--frames"));
+	app.add_option("--every", options->capture_every,
+		       "--capture: write every Kth frame (lit frames in strobe mode alternate)")
+		->check(CLI::Range(1, 100000))
+		->needs(capture)
 		->capture_default_str();
 	/* Prints a key table of docs/configuration.md (scripts/update-config-doc), then exits. */
 	std::string doc_sections;
@@ -304,6 +326,36 @@ const dockpose::board::BoardInfo *loadBoard(const Options &options,
 	return info;
 }
 
+/* --capture: the daemon's frame loop with a FrameCapture as its frame tap; the exit status. */
+int runCapture(const Options &options, const dockpose::firmware::BoardConfig &config,
+	       dockpose::firmware::Daemon *daemon)
+{
+	using namespace dockpose;
+
+	firmware::FrameCapture capture(options.capture_dir, options.capture_frames,
+				       options.capture_every,
+				       config.strobe.mode == board::StrobeMode::Alternate, &g_stop);
+	daemon->setFrameTap(&capture);
+	int status = daemon->run(g_stop, options.run_for_s);
+	daemon->setFrameTap(nullptr);
+	daemon->printSummary(stderr);
+	if (!capture.error().empty()) {
+		std::fprintf(stderr, "dockposed: --capture: %s\n", capture.error().c_str());
+		return 1;
+	}
+	if (!capture.done()) {
+		std::fprintf(stderr,
+			     "dockposed: --capture: only %d of %d frames written to %s (the run "
+			     "ended first)\n",
+			     capture.written(), options.capture_frames,
+			     options.capture_dir.c_str());
+		return status != 0 ? status : 1;
+	}
+	std::fprintf(stderr, "dockposed: --capture: %d frames written to %s, LED off\n",
+		     capture.written(), options.capture_dir.c_str());
+	return status;
+}
+
 /* Wire the board, start the daemon under the start-up watchdog, run it: the exit status. */
 int runBoard(const Options &options, const dockpose::board::BoardInfo &info,
 	     const dockpose::firmware::BoardConfig &config)
@@ -336,9 +388,12 @@ int runBoard(const Options &options, const dockpose::board::BoardInfo &info,
 		return 1;
 	}
 	ignoreStrayAlarms();
-	const int status = daemon.run(g_stop, options.run_for_s);
-	daemon.printSummary(stderr);
-	return status;
+	if (options.capture_dir.empty()) {
+		const int status = daemon.run(g_stop, options.run_for_s);
+		daemon.printSummary(stderr);
+		return status;
+	}
+	return runCapture(options, config, &daemon);
 }
 
 /* The daemon itself; main() turns an exception that escapes it into exit 70. */
@@ -351,6 +406,12 @@ int run(int argc, char **argv)
 	const dockpose::board::BoardInfo *info = loadBoard(options, &config);
 	if (!info)
 		return 2;
+	if (!options.capture_dir.empty()) {
+		if (auto s = dockpose::firmware::prepareCaptureDir(options.capture_dir); !s) {
+			std::fprintf(stderr, "dockposed: --capture: %s\n", s.message().c_str());
+			return 2;
+		}
+	}
 	return runBoard(options, *info, config);
 }
 

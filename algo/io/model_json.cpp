@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <string_view>
 
 #include <nlohmann/json.hpp>
 
@@ -255,6 +256,102 @@ Status readApproach(const json &doc, const std::string &source, TargetModel *m)
 	return Status::ok();
 }
 
+/* n decimal digits at text[*i] with a value in [lo, hi]; *i moves past them. */
+bool readDigits(std::string_view text, std::size_t *i, int n, int lo, int hi)
+{
+	if (text.size() < *i + static_cast<std::size_t>(n))
+		return false;
+	int value = 0;
+	for (int k = 0; k < n; ++k) {
+		const char c = text[(*i)++];
+		if (c < '0' || c > '9')
+			return false;
+		value = value * 10 + (c - '0');
+	}
+	return value >= lo && value <= hi;
+}
+
+/*
+ * ISO 8601 as calibration tools write it: YYYY-MM-DD, then optionally Thh:mm[:ss[.fff]] and
+ * Z or +hh:mm / -hh:mm (or +hhmm). Hand-written, not std::regex: libstdc++'s regex recurses
+ * per character and a long string would exhaust the stack.
+ */
+bool isIsoDate(std::string_view text)
+{
+	std::size_t i = 0;
+	const auto expect = [&](char c) {
+		return i < text.size() && text[i++] == c;
+	};
+	if (!readDigits(text, &i, 4, 0, 9999) || !expect('-') || !readDigits(text, &i, 2, 1, 12) ||
+	    !expect('-') || !readDigits(text, &i, 2, 1, 31))
+		return false;
+	if (i == text.size())
+		return true;
+	if (!expect('T') || !readDigits(text, &i, 2, 0, 23) || !expect(':') ||
+	    !readDigits(text, &i, 2, 0, 59))
+		return false;
+	if (i < text.size() && text[i] == ':') {
+		++i;
+		if (!readDigits(text, &i, 2, 0, 59))
+			return false;
+		if (i < text.size() && text[i] == '.') {
+			++i;
+			const std::size_t first = i;
+			while (i < text.size() && text[i] >= '0' && text[i] <= '9')
+				++i;
+			if (i == first)
+				return false;
+		}
+	}
+	if (i == text.size())
+		return true;
+	if (text[i] == 'Z')
+		return i + 1 == text.size();
+	if (text[i] != '+' && text[i] != '-')
+		return false;
+	++i;
+	if (!readDigits(text, &i, 2, 0, 23))
+		return false;
+	if (i < text.size() && text[i] == ':')
+		++i;
+	return readDigits(text, &i, 2, 0, 59) && i == text.size();
+}
+
+/*
+ * Camera, the calibration's record (dockpose calibrate writes it; dockpose reads only
+ * "sigma", but the rest must be sane): "rms_px" >= 0, "frames" an integer >= 1, "date" an
+ * ISO 8601 date or date and time ("2026-12-03" or "2026-12-03T18:40:00Z", a UTC offset
+ * instead of Z, or none).
+ */
+Status readCalibrationRecord(const json &doc, const std::string &source)
+{
+	double rms_px = 0.0;
+	if (Status s = readNumber(doc, "rms_px", source, false, &rms_px); !s)
+		return s;
+	if (!(std::isfinite(rms_px) && rms_px >= 0.0))
+		return Status::error(source +
+				     ": 'rms_px' must be a reprojection rms >= 0 px, not " +
+				     doc["rms_px"].dump());
+	if (const auto frames = doc.find("frames"); frames != doc.end()) {
+		if (!frames->is_number_integer() && !frames->is_number_unsigned())
+			return Status::error(source + ": 'frames' must be an integer, not " +
+					     typeName(*frames));
+		if (frames->get<std::int64_t>() < 1)
+			return Status::error(source +
+					     ": 'frames' must be the number of frames calibrated "
+					     "from, >= 1, not " +
+					     frames->dump());
+	}
+	if (const auto date = doc.find("date"); date != doc.end()) {
+		if (!date->is_string() || !isIsoDate(date->get<std::string>()))
+			return Status::error(source +
+					     ": 'date' must be an ISO 8601 date (\"2026-12-03\" or "
+					     "\"2026-12-03T18:40:00Z\"), not " +
+					     date->dump());
+	}
+	return Status::ok();
+}
+
 struct Field {
 	const char *key;
 	double *value;
@@ -395,9 +492,7 @@ Result<CameraIntrinsics> parseCameraIntrinsics(const std::string &json_text,
 	}
 	if (Status s = readSigma(doc, source, &k); !s)
 		return s;
-	/* Written by calibration tools; dockpose does not use it, but it must be sane. */
-	double rms_px = 0.0;
-	if (Status s = readNumber(doc, "rms_px", source, false, &rms_px); !s)
+	if (Status s = readCalibrationRecord(doc, source); !s)
 		return s;
 
 	if (Status s = k.validate(); !s)

@@ -19,8 +19,9 @@
  *   Optional: "sigma": {"fx": .., "fy": .., "cx": .., "cy": .., "k1": ..,
  *   "k2": .., "p1": .., "p2": ..}, the calibration's 1-sigma uncertainty of
  *   any subset of the parameters (>= 0; CameraIntrinsics::sigma), and what a
- *   calibration tool writes beside them: "rms_px" (a number), "frames",
- *   "date" (not used).
+ *   calibration tool writes beside them (dockpose calibrate; not used, but
+ *   validated): "rms_px" (>= 0 px), "frames" (an integer >= 1) and "date"
+ *   (ISO 8601: "2026-12-03" or "2026-12-03T18:40:00Z", or with a UTC offset).
  *
  * Unknown keys are ignored. Nothing here throws: every failure comes back as
  * a Result whose message names the file (or "<text>") and the problem.

@@ -482,7 +482,13 @@ TEST_F(Cli, HelpIsClear)
 	EXPECT_EQ(top.code, 0);
 	EXPECT_NE(top.out.find("solve"), std::string::npos);
 	EXPECT_NE(top.out.find("render"), std::string::npos);
+	EXPECT_NE(top.out.find("calibrate"), std::string::npos);
 	EXPECT_NE(top.out.find("Exit codes"), std::string::npos);
+	/* Listed with its options whether or not this dockpose was built with OpenCV. */
+	const ToolRun calibrate = run("calibrate --help", false);
+	EXPECT_EQ(calibrate.code, 0);
+	for (const char *opt : { "--grid", "--output", "images" })
+		EXPECT_NE(calibrate.out.find(opt), std::string::npos) << opt;
 	const ToolRun solve = run("solve --help", false);
 	EXPECT_EQ(solve.code, 0);
 	EXPECT_NE(solve.out.find("--threshold"), std::string::npos);

@@ -498,6 +498,21 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 	EXPECT_EQ(c.value().sigma.fy, 0.0);
 	EXPECT_TRUE(c.value().sigma.any());
 	EXPECT_FALSE(loadCameraIntrinsics(kData + "/cam512.json").value().sigma.any());
+	/* What dockpose calibrate writes: a UTC date and time; an offset is ISO 8601 too. */
+	for (const char *date : { "2026-12-03T18:40:00Z", "2026-12-03T18:40:00+01:00",
+				  "2026-12-03T18:40", "2026-12-03T18:40:00.25Z" })
+		EXPECT_TRUE(
+			parseCameraIntrinsics(
+				R"({"width": 640, "height": 480, "fx": 500, "fy": 500, "cx": 320,
+				    "cy": 240, "frames": 1, "date": ")" +
+				std::string(date) + "\"}")
+				.isOk())
+			<< date;
+	/* A very long "date" is refused, not a stack overflow (the check is not a std::regex). */
+	EXPECT_FALSE(parseCameraIntrinsics(R"({"width": 640, "height": 480, "fx": 500, "fy": 500,
+					       "cx": 320, "cy": 240, "date": "2026-12-03T)" +
+					   std::string(200000, '1') + "\"}")
+			     .isOk());
 
 	const std::vector<BadCase> targets = {
 		{ "negative tolerance", "{" + square + R"(, "led_sigma_mm": -1})",
@@ -542,6 +557,19 @@ TEST(ModelJson, OptionalUncertaintyAndApproach)
 		  "'cx' must be a number" },
 		{ "string rms", "{" + cam + R"(, "rms_px": "small"})",
 		  "'rms_px' must be a number" },
+		{ "negative rms", "{" + cam + R"(, "rms_px": -0.1})",
+		  "'rms_px' must be a reprojection rms >= 0 px" },
+		{ "fractional frames", "{" + cam + R"(, "frames": 2.5})",
+		  "'frames' must be an integer" },
+		{ "no frames", "{" + cam + R"(, "frames": 0})", "'frames' must be the number" },
+		{ "date not a string", "{" + cam + R"(, "date": 20261203})",
+		  "'date' must be an ISO 8601 date" },
+		{ "date not ISO", "{" + cam + R"(, "date": "03/12/2026"})",
+		  "'date' must be an ISO 8601 date" },
+		{ "month 13", "{" + cam + R"(, "date": "2026-13-01"})",
+		  "'date' must be an ISO 8601 date" },
+		{ "hour 24", "{" + cam + R"(, "date": "2026-12-03T24:00:00Z"})",
+		  "'date' must be an ISO 8601 date" },
 	};
 	for (const BadCase &b : cameras) {
 		const auto r = parseCameraIntrinsics(b.text, "cam.json");

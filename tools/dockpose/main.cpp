@@ -26,6 +26,11 @@
  *       Synthetic PGM frames DIR/frame_NNNN.pgm and DIR/truth.jsonl with one
  *       line per frame: {"file", "seed", "t_mm", "q_wxyz", "rpy_deg",
  *       "visible_mask", "occluded_mask", "clutter_blobs", "led_px"}.
+ *
+ *   dockpose calibrate --grid GRID.json -o CAMERA.json IMAGE...
+ *       The camera's intrinsics from PGM frames of a dot grid (calibrate.h,
+ *       docs/calibration.md). Built only where OpenCV is found; a dockpose
+ *       built without it says so and exits 2.
  */
 #include <cmath>
 #include <cstdio>
@@ -48,6 +53,7 @@
 #include "algo/pose.h"
 #include "algo/synth/renderer.h"
 #include "tools/dockpose/annotate.h"
+#include "tools/dockpose/calibrate.h"
 #include "tools/dockpose/json_line.h"
 
 namespace {
@@ -343,6 +349,33 @@ int runRender(const RenderArgs &args)
 	return kExitOk;
 }
 
+/* `dockpose calibrate`: its options into *args. */
+CLI::App *addCalibrateCommand(CLI::App *app, dockpose::tool::CalibrateArgs *args)
+{
+	CLI::App *cmd = app->add_subcommand(
+		"calibrate", "Camera intrinsics (camera file) from PGM frames of a dot grid.");
+	cmd->add_option("--grid", args->grid_path,
+			R"(Grid file: {"rows", "cols", "spacing_mm", "layout"})")
+		->required();
+	cmd->add_option("-o,--output", args->output_path, "Camera file to write (CAMERA.json)")
+		->required();
+	cmd->add_option("images", args->images, "PGM frames of the grid")->required();
+	return cmd;
+}
+
+/* `dockpose calibrate`, where this dockpose was built with OpenCV; the exit status. */
+int runCalibrateCommand(const dockpose::tool::CalibrateArgs &args)
+{
+#ifdef DOCKPOSE_HAVE_OPENCV
+	return dockpose::tool::runCalibrate(args);
+#else
+	(void)args;
+	std::cerr << "dockpose calibrate: this dockpose was built without OpenCV (calibrate "
+		     "uses its calib3d; install libopencv-dev and rebuild the host tool)\n";
+	return kExitUsage;
+#endif
+}
+
 /* The tool itself; main() turns an unexpected exception into a message and exit 3. */
 /* `dockpose solve`: its options into *solve. */
 CLI::App *addSolveCommand(CLI::App *app, SolveArgs *solve)
@@ -468,6 +501,8 @@ int run(int argc, char **argv)
 	RenderArgs render;
 	CLI::Option *range_opt = nullptr;
 	CLI::App *render_cmd = addRenderCommand(&app, &render, &range_opt);
+	dockpose::tool::CalibrateArgs calibrate;
+	CLI::App *calibrate_cmd = addCalibrateCommand(&app, &calibrate);
 
 	try {
 		app.parse(argc, argv);
@@ -485,6 +520,8 @@ int run(int argc, char **argv)
 		}
 		return runRender(render);
 	}
+	if (calibrate_cmd->parsed())
+		return runCalibrateCommand(calibrate);
 	return kExitUsage;
 }
 
