@@ -69,7 +69,7 @@ void downscaleBox(const ImageView &in, int factor, std::uint8_t *out, int out_wi
 				rows[x] = static_cast<std::uint8_t>((r0[x] + r1[x] + 1) >> 1);
 			std::uint8_t *__restrict o =
 				out + static_cast<std::ptrdiff_t>(y) * out_width;
-			for (int x = 0; x < n; ++x)
+			for (std::ptrdiff_t x = 0; x < n; ++x)
 				o[x] = static_cast<std::uint8_t>(
 					(rows[2 * x] + rows[2 * x + 1] + 1) >> 1);
 		}
@@ -84,9 +84,9 @@ void downscaleBox(const ImageView &in, int factor, std::uint8_t *out, int out_wi
 		std::fill(sums, sums + n, 0u);
 		for (int dy = 0; dy < factor; ++dy) {
 			const std::uint8_t *__restrict r = in.row(y * factor + dy);
-			for (int x = 0; x < n; ++x) {
+			for (std::ptrdiff_t x = 0; x < n; ++x) {
 				std::uint32_t s = 0;
-				for (int dx = 0; dx < factor; ++dx)
+				for (std::ptrdiff_t dx = 0; dx < factor; ++dx)
 					s += r[x * factor + dx];
 				sums[x] += s;
 			}
