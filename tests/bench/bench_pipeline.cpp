@@ -23,6 +23,7 @@
 #include "algo/io/model_json.h"
 #include "algo/pipeline.h"
 #include "algo/synth/renderer.h"
+#include "tests/bench/ratio_reporter.h"
 
 using namespace dockpose;
 
@@ -193,18 +194,6 @@ void openCvPipeline(benchmark::State &state)
 }
 
 /* Keeps the median real time (microseconds) of each benchmark for the ratio summary. */
-class RatioReporter : public benchmark::ConsoleReporter
-{
-public:
-	void ReportRuns(const std::vector<Run> &runs) override
-	{
-		ConsoleReporter::ReportRuns(runs);
-		for (const Run &run : runs)
-			if (run.run_type == Run::RT_Aggregate && run.aggregate_name == "median")
-				median_us[run.run_name.function_name] = run.GetAdjustedRealTime();
-	}
-	std::map<std::string, double> median_us;
-};
 
 } /* namespace */
 
@@ -230,7 +219,7 @@ BENCHMARK(openCvPipeline)->Repetitions(7)->ReportAggregatesOnly(true)->Unit(benc
 int main(int argc, char **argv)
 {
 	benchmark::Initialize(&argc, argv);
-	RatioReporter reporter;
+	bench::RatioReporter reporter;
 	benchmark::RunSpecifiedBenchmarks(&reporter);
 	auto &m = reporter.median_us;
 	if (m.count("readFloor") && m.count("pipelineTracking") && m.count("openCvPipeline") &&

@@ -23,6 +23,7 @@
 #include "algo/synth/renderer.h"
 #include "firmware/preview.h"
 #include "firmware/protocol/dockpose_can.h"
+#include "tests/bench/ratio_reporter.h"
 
 using namespace dockpose;
 
@@ -112,19 +113,6 @@ void frameLoopPreviewOn(benchmark::State &state)
 	frameLoop(state, true);
 }
 
-class RatioReporter : public benchmark::ConsoleReporter
-{
-public:
-	void ReportRuns(const std::vector<Run> &runs) override
-	{
-		ConsoleReporter::ReportRuns(runs);
-		for (const Run &run : runs)
-			if (run.run_type == Run::RT_Aggregate && run.aggregate_name == "median")
-				median_us[run.run_name.function_name] = run.GetAdjustedRealTime();
-	}
-	std::map<std::string, double> median_us;
-};
-
 } /* namespace */
 
 BENCHMARK(frameLoopPreviewOff)
@@ -139,7 +127,7 @@ BENCHMARK(frameLoopPreviewOn)
 int main(int argc, char **argv)
 {
 	benchmark::Initialize(&argc, argv);
-	RatioReporter reporter;
+	bench::RatioReporter reporter;
 	benchmark::RunSpecifiedBenchmarks(&reporter);
 	auto &m = reporter.median_us;
 	if (m.count("frameLoopPreviewOff") && m.count("frameLoopPreviewOn")) {

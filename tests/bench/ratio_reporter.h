@@ -1,0 +1,30 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The benchmarks' console reporter that also keeps each benchmark's median
+ * (real time, in the benchmark's unit) by function name, so that main() can
+ * print the ratios of one run. Allocates: per run reported (not timed).
+ */
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+
+namespace dockpose::bench {
+
+class RatioReporter : public benchmark::ConsoleReporter
+{
+public:
+	void ReportRuns(const std::vector<Run> &runs) override
+	{
+		ConsoleReporter::ReportRuns(runs);
+		for (const Run &run : runs)
+			if (run.run_type == Run::RT_Aggregate && run.aggregate_name == "median")
+				median_us[run.run_name.function_name] = run.GetAdjustedRealTime();
+	}
+	std::map<std::string, double> median_us;
+};
+
+} /* namespace dockpose::bench */
