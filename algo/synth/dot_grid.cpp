@@ -105,9 +105,9 @@ bool dotGridInFrame(const CameraModel &camera, const DotGrid &grid, const Pose &
 bool dotGridView(const CameraModel &camera, const DotGrid &grid, int n, synth::Rng *rng, Pose *pose)
 {
 	const CameraIntrinsics &k = camera.intrinsics();
-	static const double kPlaces[9][2] = { { 0.15, 0.15 }, { 0.85, 0.15 }, { 0.15, 0.85 },
-					      { 0.85, 0.85 }, { 0.5, 0.12 },  { 0.5, 0.88 },
-					      { 0.12, 0.5 },  { 0.88, 0.5 },  { 0.5, 0.5 } };
+	static constexpr double kPlaces[9][2] = { { 0.15, 0.15 }, { 0.85, 0.15 }, { 0.15, 0.85 },
+						  { 0.85, 0.85 }, { 0.5, 0.12 },  { 0.5, 0.88 },
+						  { 0.12, 0.5 },  { 0.88, 0.5 },  { 0.5, 0.5 } };
 	const double tilt_deg = rng->uniform(30.0, 45.0);
 	const double axis_deg = 40.0 * n + rng->uniform(-10.0, 10.0);
 	const double roll_deg = rng->uniform(-30.0, 30.0);

@@ -28,6 +28,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -315,9 +316,7 @@ int runStudy(const RunArgs &a)
 	return 0;
 }
 
-} /* namespace */
-
-int main(int argc, char **argv)
+int mainChecked(int argc, char **argv)
 {
 	CLI::App app{ "dockpose-paper-study: the paper's relative-move study on rendered frames" };
 	app.require_subcommand(1);
@@ -349,4 +348,16 @@ int main(int argc, char **argv)
 	if (grid->parsed())
 		return runGrid(g);
 	return runStudy(r);
+}
+
+} /* namespace */
+
+int main(int argc, char **argv)
+{
+	try {
+		return mainChecked(argc, argv);
+	} catch (const std::exception &e) {
+		std::fprintf(stderr, "dockpose-paper-study: %s\n", e.what());
+		return 1;
+	}
 }
