@@ -200,7 +200,7 @@ void reportCoverage(const std::vector<Frame> &frames, cv::Size size, double cx, 
 	double reach_px = 0.0;
 	for (const Frame &f : frames)
 		for (const cv::Point2f &p : f.centres) {
-			const double x = p.x, y = p.y;
+			const double x = static_cast<double>(p.x), y = static_cast<double>(p.y);
 			const int c = std::clamp(static_cast<int>(x * kCoverageCells / size.width),
 						 0, kCoverageCells - 1);
 			const int r = std::clamp(static_cast<int>(y * kCoverageCells / size.height),
