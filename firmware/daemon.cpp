@@ -635,9 +635,9 @@ void Daemon::startPreview()
 		1, static_cast<int>(std::ceil(
 			   config_.camera.frame_rate_hz / config_.preview.rate_hz - 1e-9)));
 	preview_count_ = preview_every_ - 1; /* the first frame goes out */
-	std::fprintf(log_, "dockposed: preview /dev/shm/%s: every %d frames, %d px wide\n",
-		     config_.preview.name.c_str(), preview_every_,
-		     k.width / previewFactor(k.width, config_.preview.width));
+	std::fprintf(log_, "dockposed: preview /dev/shm/%s: every %d frames, %dx%d px\n",
+		     config_.preview.name.c_str(), preview_every_, preview_.width(),
+		     preview_.height());
 }
 
 void Daemon::handleCommands()

@@ -141,6 +141,9 @@ public:
 	/* Unmap and unlink the segment (readers that have it mapped keep their copy). */
 	void close();
 	bool isOpen() const { return ring_ != nullptr; }
+	/* The preview image's size (after open()). */
+	int width() const { return width_; }
+	int height() const { return height_; }
 
 	/*
 	 * Publish one frame: the image downscaled, the blobs and the pose of
