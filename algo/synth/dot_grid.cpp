@@ -17,8 +17,8 @@ constexpr double kPi = 3.14159265358979323846;
 
 std::string DotGrid::json() const
 {
-	return "{\"rows\": " + std::to_string(rows) + ", \"cols\": " + std::to_string(cols) +
-	       ", \"spacing_mm\": " + std::to_string(spacing_mm) + ", \"layout\": \"" +
+	return R"({"rows": )" + std::to_string(rows) + R"(, "cols": )" + std::to_string(cols) +
+	       R"(, "spacing_mm": )" + std::to_string(spacing_mm) + R"(, "layout": ")" +
 	       (asymmetric ? "asymmetric" : "symmetric") + "\"}\n";
 }
 
