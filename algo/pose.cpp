@@ -533,21 +533,25 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm,
 
 	/*
 	 * Covariance sigma^2 (J^T J)^-1, inverted after Jacobi scaling (the
-	 * translation and rotation columns differ by orders of magnitude).
+	 * translation and rotation columns differ by orders of magnitude) by
+	 * Cholesky: the scaled matrix has a unit diagonal, and one whose
+	 * condition number (1-norm, exact from the inverse) is above 1e12 leaves
+	 * some direction of the pose undetermined. (A 6x6 eigen-solve made the
+	 * same test at 8 % of a tracked frame's time, Eigen's rcond estimate at 3 %.)
 	 */
 	const Vector6d d = ev.JtJ.diagonal();
 	if (!(d.minCoeff() > 0.0) || !d.allFinite())
 		return false;
 	const Vector6d inv_sqrt = d.cwiseSqrt().cwiseInverse();
 	const Matrix6d B = inv_sqrt.asDiagonal() * ev.JtJ * inv_sqrt.asDiagonal();
-	const Eigen::SelfAdjointEigenSolver<Matrix6d> es(B);
-	if (es.info() != Eigen::Success)
+	const Eigen::LLT<Matrix6d> llt(B);
+	if (llt.info() != Eigen::Success)
 		return false;
-	const Vector6d lambdas = es.eigenvalues();
-	if (!(lambdas(0) > 1e-12 * lambdas(5)))
+	const Matrix6d B_inv = llt.solve(Matrix6d::Identity());
+	const double norm1 = B.cwiseAbs().colwise().sum().maxCoeff();
+	const double inv_norm1 = B_inv.cwiseAbs().colwise().sum().maxCoeff();
+	if (!B_inv.allFinite() || !(norm1 * inv_norm1 < 1e12))
 		return false;
-	const Matrix6d B_inv = es.eigenvectors() * lambdas.cwiseInverse().asDiagonal() *
-			       es.eigenvectors().transpose();
 	const Matrix6d inv = inv_sqrt.asDiagonal() * B_inv * inv_sqrt.asDiagonal();
 	if (!pixel_cov) {
 		double sigma2 = options.sigma_px * options.sigma_px;
