@@ -66,6 +66,8 @@ struct RunArgs {
 	std::uint64_t seed = 1;
 	double noise_sigma = 2.0;
 	double led_sigma_mm = 0.1;
+	/* The optics' blur (Gaussian sigma, px): RenderOptions' default unless given. */
+	double blur_sigma_px = RenderOptions{}.blur_sigma_px;
 };
 
 /* One set's axis: translations index t_mm, rotations (roll, pan, tilt). */
@@ -210,8 +212,8 @@ int runStudy(const RunArgs &a)
 	printCamera("true camera (rendering)", truth_k.value());
 	printCamera("solve camera", solve_k.value());
 	std::printf("LEDs displaced by sigma %.3f mm per coordinate (largest %.3f mm), "
-		    "read noise %.2f levels (Gaussian), %d readings per set\n",
-		    a.led_sigma_mm, worst_mm, a.noise_sigma, a.readings);
+		    "read noise %.2f levels (Gaussian), blur sigma %.2f px, %d readings per set\n",
+		    a.led_sigma_mm, worst_mm, a.noise_sigma, a.blur_sigma_px, a.readings);
 
 	const FrameRenderer renderer(built, truth_k.value());
 	PipelineConfig config;
@@ -220,6 +222,7 @@ int runStudy(const RunArgs &a)
 	const std::vector<Eigen::Matrix3d> syms = symmetries(nominal);
 	RenderOptions options;
 	options.noise_sigma = a.noise_sigma;
+	options.blur_sigma_px = a.blur_sigma_px;
 	const std::vector<Axis> axes = {
 		{ "x", false, 0, { 5.0, 15.0 } },	 { "y", false, 1, { 5.0, 15.0 } },
 		{ "z", false, 2, { 5.0, 15.0 } },	 { "roll", true, 0, { 5.0, 10.0, 20.0 } },
@@ -341,6 +344,9 @@ int mainChecked(int argc, char **argv)
 	run->add_option("--seed", r.seed, "random seed (LED displacements, frames)");
 	run->add_option("--noise-sigma", r.noise_sigma, "read noise, levels")
 		->check(CLI::Range(0.0, 50.0));
+	run->add_option("--blur-sigma-px", r.blur_sigma_px,
+			"the optics' blur of each LED's spot: Gaussian sigma, px")
+		->check(CLI::Range(0.3, 5.0));
 	run->add_option("--led-sigma-mm", r.led_sigma_mm,
 			"LED position tolerance: sigma per coordinate, mm")
 		->check(CLI::Range(0.0, 10.0));
