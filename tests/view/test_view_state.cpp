@@ -5,7 +5,8 @@
  * page shows (pose, σ, state, fault names, rate), stale after max(3 periods,
  * 300 ms), damaged frames and lines named as problems, a log followed as it
  * grows (a half-written line waits for its end; a truncated file is read
- * again), and the 30 s history. The page in a browser: view_browser_e2e.py.
+ * again), the 30 s history, and the page's command as the DP_Command a sensor
+ * decodes. The page in a browser: view_browser_e2e.py.
  */
 #include <unistd.h>
 
@@ -21,6 +22,7 @@
 #include "firmware/protocol/dockpose_can.h"
 #include "tools/dockpose/view/can_input.h"
 #include "tools/dockpose/view/candump.h"
+#include "tools/dockpose/view/command.h"
 #include "tools/dockpose/view/view_state.h"
 
 namespace {
@@ -263,6 +265,48 @@ TEST(ViewState, ProtocolNamesComeFromTheHeader)
 	EXPECT_EQ(p["states"][2], "TRACKING");
 	EXPECT_EQ(p["strobe_modes"].back(), "UNCHANGED");
 	EXPECT_EQ(p["track_modes"], json::array({ "TRACK", "SEARCH_ONLY" }));
+}
+
+TEST(Command, ThePagesCommandIsTheDpCommandASensorDecodes)
+{
+	can::CommandData cmd;
+	ASSERT_EQ(tool::commandFromJson(json::parse(R"({"enable": false, "mode": "SEARCH_ONLY",
+		"strobe": "ALTERNATE", "exposure_us": 1500, "gain": 2.5})"),
+					&cmd),
+		  "");
+	can::Encoder encoder;
+	const can::RawFrame frame = encoder.encodeCommand(cmd);
+	EXPECT_EQ(frame.id, can::kDefaultBaseId + can::kCommand);
+	can::Decoder sensor;
+	ASSERT_EQ(sensor.feed(frame), can::Decoder::Event::Command);
+	const can::CommandData &got = sensor.command();
+	EXPECT_FALSE(got.enable);
+	EXPECT_EQ(got.mode, can::TrackMode::SearchOnly);
+	EXPECT_EQ(got.strobe, can::StrobeMode::Alternate);
+	EXPECT_EQ(got.exposure_us, 1500);
+	EXPECT_NEAR(got.gain, 2.5, 1e-9);
+
+	/* Absent fields: the defaults (enabled, track, nothing else changed). */
+	can::CommandData defaults;
+	ASSERT_EQ(tool::commandFromJson(json::object(), &defaults), "");
+	EXPECT_TRUE(defaults.enable);
+	EXPECT_EQ(defaults.strobe, can::StrobeMode::Unchanged);
+	EXPECT_EQ(defaults.exposure_us, 0);
+
+	/* Each wrong field says which. */
+	const char *wrong[][2] = {
+		{ R"({"mode": "FAST"})", "mode" },
+		{ R"({"strobe": 2})", "strobe" },
+		{ R"({"exposure_us": 70000})", "exposure_us" },
+		{ R"({"gain": 30})", "gain" },
+		{ R"({"enable": "yes"})", "enable" },
+		{ R"([1, 2])", "not a JSON object" },
+	};
+	for (const auto &[text, field] : wrong) {
+		can::CommandData c;
+		const std::string error = tool::commandFromJson(json::parse(text), &c);
+		EXPECT_NE(error.find(field), std::string::npos) << text << ": " << error;
+	}
 }
 
 class Follower : public ::testing::Test
