@@ -114,7 +114,7 @@ class Browser:
 		return self.js(f"(document.getElementById({json.dumps(element_id)}) || {{}}).textContent")
 
 	def screenshot(self, clip=None):
-		params = {"format": "png"}
+		params = {"format": "png", "captureBeyondViewport": True}
 		if clip:
 			params["clip"] = dict(clip, scale=1)
 		return base64.b64decode(self.call("Page.captureScreenshot", params)["data"])
@@ -462,7 +462,7 @@ def main():
 	args.source = os.path.abspath(args.source)
 	if args.shot:
 		profile = tempfile.mkdtemp(prefix="dockpose-view-shot.")
-		browser = Browser(args.chromium, profile, 1360, 1000)
+		browser = Browser(args.chromium, profile, 1360, 1100)
 		try:
 			browser.open(args.shot[0])
 			time.sleep(args.shot_wait)
