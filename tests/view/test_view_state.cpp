@@ -413,6 +413,16 @@ TEST_F(Follower, AMissingLogIsAProblemUntilItAppears)
 	ASSERT_TRUE(hasProblem(s, "CAN log")) << s["problems"].dump();
 	EXPECT_NE(s["problems"][0]["detail"].get<std::string>().find("No such file"),
 		  std::string::npos);
+	EXPECT_FALSE(s["problems"][0]["resolved"].get<bool>());
+
+	/* The log appears (the daemon opened its bus): read within a second, the problem resolved. */
+	can::Encoder encoder;
+	append(reportLines(&encoder, 0, 6));
+	usleep(1100000);
+	EXPECT_EQ(follower.poll(), 6 * 7);
+	const json after = state.stateJson(kT0Us);
+	EXPECT_EQ(after["frame"], poseAt(5).frame_counter);
+	EXPECT_TRUE(after["problems"][0]["resolved"].get<bool>()) << after["problems"].dump();
 }
 
 } /* namespace */

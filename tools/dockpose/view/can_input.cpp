@@ -69,6 +69,8 @@ void CandumpFollower::reopen()
 		missing_reported_ = true;
 		return;
 	}
+	if (missing_reported_)
+		state_->resolve("CAN log");
 	missing_reported_ = false;
 	struct stat st {
 	};

@@ -173,7 +173,21 @@ void ViewState::noteProblem(const std::string &name, const std::string &detail, 
 	++p.count;
 	p.detail = detail.size() > 200 ? detail.substr(0, 200) + "..." : detail;
 	p.last_us = now_us;
+	p.resolved = false;
 	++version_;
+}
+
+void ViewState::resolve(const std::string &name)
+{
+	{
+		const std::lock_guard<std::mutex> lock(mutex_);
+		const auto it = problems_.find(name);
+		if (it == problems_.end() || it->second.resolved)
+			return;
+		it->second.resolved = true;
+		++version_;
+	}
+	updated_.notify_all();
 }
 
 void ViewState::setPreviewError(const std::string &message, std::int64_t now_us)
@@ -197,6 +211,9 @@ void ViewState::setPreviewFrame(std::unique_ptr<firmware::PreviewFrame> *frame,
 		preview_published_ = published;
 		preview_us_ = now_us;
 		preview_error_.clear();
+		const auto it = problems_.find("preview ring");
+		if (it != problems_.end())
+			it->second.resolved = true;
 		++version_;
 	}
 	updated_.notify_all();
@@ -299,6 +316,7 @@ json ViewState::stateJson(std::int64_t now_us) const
 		problems.push_back({ { "name", name },
 				     { "count", p.count },
 				     { "detail", p.detail },
+				     { "resolved", p.resolved },
 				     { "ago_s", static_cast<double>(now_us - p.last_us) / 1e6 } });
 	j["problems"] = std::move(problems);
 

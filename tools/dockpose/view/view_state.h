@@ -78,6 +78,9 @@ public:
 	void feedFd(const can::FdFrame &frame, std::int64_t arrival_us);
 	/* A named problem (the page lists it with its count and last detail). */
 	void problem(const std::string &name, const std::string &detail, std::int64_t now_us);
+	/* A problem that is a condition (a missing log or ring) is over: listed as resolved
+	 * until it comes again. */
+	void resolve(const std::string &name);
 
 	/* The preview: the ring could not be read (why), or a new frame (taken: *frame is
 	 * swapped with the kept one; the caller gets the previous buffer back to reuse). */
@@ -110,6 +113,7 @@ private:
 		std::uint64_t count = 0;
 		std::string detail;
 		std::int64_t last_us = 0;
+		bool resolved = false;
 	};
 	struct HistorySample {
 		std::int64_t t_us;
