@@ -3,11 +3,11 @@
 
 #include <httplib.h>
 #include <pthread.h>
-#include <signal.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -219,7 +219,7 @@ int runView(const ViewArgs &args)
 		sendJson(res, reply);
 	});
 	server.set_exception_handler(
-		[](const httplib::Request &, httplib::Response &res, std::exception_ptr ep) {
+		[](const httplib::Request &, httplib::Response &res, const std::exception_ptr &ep) {
 			std::string what = "unknown";
 			try {
 				std::rethrow_exception(ep);
@@ -249,23 +249,29 @@ int runView(const ViewArgs &args)
 	std::fflush(stdout);
 
 	input.start();
+	/* The signal thread: after SIGINT / SIGTERM it stops the server, again every 200 ms
+	 * until the accept loop has ended (a signal before the loop ran is not lost); it ends
+	 * with the loop, whatever ended it. */
+	std::atomic<bool> served{ false };
 	std::thread signal_thread([&] {
-		int sig = 0;
-		sigwait(&signals, &sig);
-		stopping = true;
-		state.wakeAll();
-		server.stop();
+		const timespec tick{ 0, 200000000 };
+		while (!served) {
+			if (sigtimedwait(&signals, nullptr, &tick) > 0) {
+				stopping = true;
+				state.wakeAll();
+			}
+			if (stopping)
+				server.stop();
+		}
 	});
 	const bool ok = server.listen_after_bind();
-	if (!stopping) {
-		/* The accept loop failed on its own: wake the signal thread to end it. */
-		stopping = true;
-		pthread_kill(signal_thread.native_handle(), SIGTERM);
-	}
+	served = true;
 	signal_thread.join();
+	const bool signalled = stopping;
+	stopping = true;
 	state.wakeAll();
 	input.stop();
-	return ok || stopping ? 0 : 1;
+	return ok || signalled ? 0 : 1;
 }
 
 } /* namespace dockpose::tool */

@@ -27,7 +27,7 @@
  * Threads: main (binds, then runs httplib's accept loop until stopped); the
  * CAN reader thread (follows the log or reads the socket, polls the preview
  * ring every 50 ms and reopens it when it is missing or has stopped moving);
- * a signal thread (sigwait: stops the server); httplib's pool of kHttpThreads
+ * a signal thread (sigtimedwait: stops the server); httplib's pool of kHttpThreads
  * workers, which answer requests and each hold one /api/events stream open.
  * Allocates: freely (a host tool), never in the sensor.
  *

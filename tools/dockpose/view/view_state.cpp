@@ -145,13 +145,13 @@ void ViewState::afterFeed(can::Decoder::Event event, std::int64_t arrival_us)
 void ViewState::countProblems(std::int64_t now_us)
 {
 	const can::Decoder::Counters &c = decoder_.counters();
-	const std::pair<std::uint64_t can::Decoder::Counters::*, const char *> kCounted[] = {
+	const std::pair<std::uint64_t can::Decoder::Counters::*, const char *> counted[] = {
 		{ &can::Decoder::Counters::alive_gaps, "frames lost (alive counter skipped)" },
 		{ &can::Decoder::Counters::incomplete_poses,
 		  "incomplete pose (a pose frame missing)" },
 		{ &can::Decoder::Counters::stale_poses, "pose too old at arrival" },
 	};
-	for (const auto &[member, name] : kCounted) {
+	for (const auto &[member, name] : counted) {
 		if (c.*member > seen_counters_.*member)
 			noteProblem(name, "counted " + std::to_string(c.*member), now_us);
 	}
