@@ -13,8 +13,8 @@ page's DOM and a screenshot:
   3. the pose shown is the last valid pose in the CAN log, decoded independently with canmatrix
      and the DBC (the same frame counter; x, y, z within 0.05 mm, roll, pan, tilt within
      0.005 deg: the page shows the signals at their resolution);
-  4. bad input: a malformed line, a truncated line and a frame with a bad CRC appended to the log
-     are each named on the page; the preview ring gone is named too; the server keeps answering;
+  4. bad input: a malformed line, a truncated line, a frame with a bad CRC and one with a
+     repeated alive counter appended to the log are each named on the page; the preview ring gone is named too; the server keeps answering;
   5. a second view whose preview ring is missing, and a third whose ring is not a preview ring
      (a file of zeros), name the problem on their pages.
 
@@ -379,7 +379,10 @@ def run_test(args):
 			f.write("this line is not candump\n")
 			f.write(f"({now:.6f}) can0 305#00112\n")
 			f.write(f"({now:.6f}) can0 305#{data.hex().upper()}\n")
-		for name in ("malformed log line", "truncated log line", "bad CRC"):
+			# The last status frame again: its alive counter repeats.
+			f.write(f"({now:.6f}) can0 {status_line[2]}\n")
+		for name in ("malformed log line", "truncated log line", "bad CRC",
+					 "stale alive counter"):
 			try:
 				wait_for(f"'{name}' on the page", lambda n=name: n in (problem_names(browser) or []),
 						 3)
