@@ -29,7 +29,7 @@ namespace {
 using nlohmann::json;
 
 /* An event stream sends at least this often (age and stale move without reports). */
-constexpr std::chrono::milliseconds kEventsEvery{ 200 };
+constexpr std::chrono::milliseconds kEventsEvery{ 100 };
 constexpr double kDefaultEventsHz = 30.0;
 
 void sendJson(httplib::Response &res, const json &j, int status = 200)

@@ -12,7 +12,7 @@
  *   GET  /api/state         the latest decoded state, JSON (ViewState::stateJson)
  *   GET  /api/events        the same as server-sent events, one per report, at most
  *                           ?max_hz=N a second (the page's frame rate; default 30),
- *                           at least every 200 ms (so age and stale move)
+ *                           at least every 100 ms (so age and stale move)
  *   GET  /api/history       the last 30 s of poses (ViewState::historyJson)
  *   GET  /api/preview.bin   the latest preview frame: a 4-byte little-endian
  *                           length, that many bytes of JSON (overlays, size),
