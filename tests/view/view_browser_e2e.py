@@ -44,6 +44,7 @@ class Browser:
 	"""Headless Chromium over --remote-debugging-pipe: fd 3 in, fd 4 out, NUL-separated JSON."""
 
 	def __init__(self, chromium, profile, width=1400, height=1000):
+		os.makedirs(profile, exist_ok=True)
 		# The child's ends at fds >= 10 first, so dup2 onto 3 and 4 cannot clobber them.
 		to_child_r, self.to_child = (self._high(fd) for fd in os.pipe())
 		self.from_child, from_child_w = (self._high(fd) for fd in os.pipe())
@@ -58,7 +59,7 @@ class Browser:
 			 "--hide-scrollbars", f"--window-size={width},{height}",
 			 f"--user-data-dir={profile}", "about:blank"],
 			preexec_fn=fds, close_fds=False, stdout=subprocess.DEVNULL,
-			stderr=open(os.path.join(profile + ".log"), "w"))
+			stderr=open(os.path.join(profile, "chromium.log"), "w"))
 		os.close(to_child_r)
 		os.close(from_child_w)
 		self.buffer = b""
