@@ -31,6 +31,11 @@
  *       The camera's intrinsics from PGM frames of a dot grid (calibrate.h,
  *       docs/calibration.md). Built only where OpenCV is found; a dockpose
  *       built without it says so and exits 2.
+ *
+ *   dockpose view [--can IFACE | --can-log FILE] [--preview NAME] [--bind ADDR] [--port N]
+ *                 [--camera C.json] [--base-id ID] [--allow-commands]
+ *       The operator's live page (view/view.h, docs/operator-view.md). Built only
+ *       where cpp-httplib is found; a dockpose built without it says so and exits 2.
  */
 #include <cmath>
 #include <cstdio>
@@ -55,6 +60,7 @@
 #include "tools/dockpose/annotate.h"
 #include "tools/dockpose/calibrate.h"
 #include "tools/dockpose/json_line.h"
+#include "tools/dockpose/view/view.h"
 
 namespace {
 
@@ -376,7 +382,45 @@ int runCalibrateCommand(const dockpose::tool::CalibrateArgs &args)
 #endif
 }
 
-/* The tool itself; main() turns an unexpected exception into a message and exit 3. */
+/* `dockpose view`: its options into *args. */
+CLI::App *addViewCommand(CLI::App *app, dockpose::tool::ViewArgs *args)
+{
+	CLI::App *cmd = app->add_subcommand(
+		"view",
+		"The operator's live page: preview with overlays, pose and status from CAN.");
+	CLI::Option *can = cmd->add_option("--can", args->can_interface,
+					   "SocketCAN interface to read the sensor's reports from");
+	CLI::Option *log = cmd->add_option("--can-log", args->can_log,
+					   "candump log to follow as it grows (candump -L format)");
+	can->excludes(log);
+	cmd->add_option("--preview", args->preview,
+			"The daemon's preview ring: /dev/shm/NAME (preview.name)")
+		->default_val(args->preview);
+	cmd->add_option("--bind", args->bind, "Address to listen on")->default_val(args->bind);
+	cmd->add_option("--port", args->port, "Port to listen on; 0: any free one (printed)")
+		->default_val(args->port);
+	cmd->add_option("--camera", args->camera,
+			"Camera intrinsics JSON: draws the target's axes projected from the pose");
+	cmd->add_option("--base-id", args->base_id, "The sensor's CAN base identifier")
+		->default_val(args->base_id);
+	cmd->add_flag("--allow-commands", args->allow_commands,
+		      "Add controls that send DP_Command (with --can only)");
+	return cmd;
+}
+
+/* `dockpose view`, where this dockpose was built with cpp-httplib; the exit status. */
+int runViewCommand(const dockpose::tool::ViewArgs &args)
+{
+#ifdef DOCKPOSE_HAVE_VIEW
+	return dockpose::tool::runView(args);
+#else
+	(void)args;
+	std::cerr << "dockpose view: not built: this dockpose was built without cpp-httplib "
+		     "(install libcpp-httplib-dev and rebuild the host tool)\n";
+	return kExitUsage;
+#endif
+}
+
 /* `dockpose solve`: its options into *solve. */
 CLI::App *addSolveCommand(CLI::App *app, SolveArgs *solve)
 {
@@ -484,6 +528,7 @@ CLI::App *addRenderCommand(CLI::App *app, RenderArgs *render, CLI::Option **rang
 	return render_cmd;
 }
 
+/* The tool itself; main() turns an unexpected exception into a message and exit 3. */
 int run(int argc, char **argv)
 {
 	CLI::App app{
@@ -503,6 +548,8 @@ int run(int argc, char **argv)
 	CLI::App *render_cmd = addRenderCommand(&app, &render, &range_opt);
 	dockpose::tool::CalibrateArgs calibrate;
 	CLI::App *calibrate_cmd = addCalibrateCommand(&app, &calibrate);
+	dockpose::tool::ViewArgs view;
+	CLI::App *view_cmd = addViewCommand(&app, &view);
 
 	try {
 		app.parse(argc, argv);
@@ -522,6 +569,8 @@ int run(int argc, char **argv)
 	}
 	if (calibrate_cmd->parsed())
 		return runCalibrateCommand(calibrate);
+	if (view_cmd->parsed())
+		return runViewCommand(view);
 	return kExitUsage;
 }
 

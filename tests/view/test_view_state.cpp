@@ -1,0 +1,428 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * dockpose view's glue between the bus and the page: candump lines parsed,
+ * reports encoded by the project's encoder decoded back into the state the
+ * page shows (pose, σ, state, fault names, rate), stale after max(3 periods,
+ * 300 ms), damaged frames and lines named as problems, a log followed as it
+ * grows (a half-written line waits for its end; a truncated file is read
+ * again), the 30 s history, and the page's command as the DP_Command a sensor
+ * decodes. The page in a browser: view_browser_e2e.py.
+ */
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "firmware/protocol/dockpose_can.h"
+#include "tools/dockpose/view/can_input.h"
+#include "tools/dockpose/view/candump.h"
+#include "tools/dockpose/view/command.h"
+#include "tools/dockpose/view/view_state.h"
+
+namespace {
+
+using namespace dockpose;
+using dockpose::tool::CandumpLine;
+using dockpose::tool::CandumpParse;
+using dockpose::tool::parseCandumpLine;
+using dockpose::tool::ViewState;
+using nlohmann::json;
+
+constexpr std::int64_t kT0Us = 1700000000000000;
+constexpr std::int64_t kPeriodUs = 16667; /* 60 reports a second */
+
+can::PoseData poseAt(int k)
+{
+	can::PoseData p;
+	p.frame_counter = static_cast<std::uint32_t>(100 + k);
+	p.t_mm[0] = 12.3 + k;
+	p.t_mm[1] = -45.6;
+	p.t_mm[2] = 1234.5 - k;
+	p.q[0] = 1.0;
+	p.rpy_deg[0] = 1.25;
+	p.rpy_deg[1] = -2.5;
+	p.rpy_deg[2] = 0.75;
+	p.sigma_t_mm[0] = 0.4;
+	p.sigma_t_mm[1] = 0.5;
+	p.sigma_t_mm[2] = 2.1;
+	p.sigma_rpy_deg[0] = 0.05;
+	p.sigma_rpy_deg[1] = 0.06;
+	p.sigma_rpy_deg[2] = 0.07;
+	p.log10_nfa = -12.3;
+	p.sensor_time_us = static_cast<std::uint32_t>(5000000 + k * kPeriodUs);
+	return p;
+}
+
+can::StatusData statusWith(std::uint8_t faults)
+{
+	can::StatusData s;
+	s.state = can::SensorState::Tracking;
+	s.pose_valid = true;
+	s.tracked = true;
+	s.strobe = can::StrobeMode::Constant;
+	s.leds_used = 7;
+	s.rms_px = 0.23;
+	s.faults = faults;
+	s.latency_ms = 1.5;
+	return s;
+}
+
+/* `count` reports at kPeriodUs into state (or into frames when given); returns the last time. */
+std::int64_t feedReports(ViewState *state, can::Encoder *encoder, int count,
+			 std::int64_t period_us = kPeriodUs, std::uint8_t faults = 0)
+{
+	std::int64_t t = kT0Us;
+	for (int k = 0; k < count; ++k) {
+		t = kT0Us + k * period_us;
+		can::PoseData pose = poseAt(k);
+		pose.sensor_time_us = static_cast<std::uint32_t>(5000000 + k * period_us);
+		can::RawFrame out[can::kMaxReportFrames];
+		const int n = encoder->encodeReport(statusWith(faults), &pose, out);
+		for (int i = 0; i < n; ++i)
+			state->feed(out[i], t);
+	}
+	return t;
+}
+
+bool hasProblem(const json &state, const std::string &name)
+{
+	for (const json &p : state["problems"])
+		if (p["name"] == name)
+			return true;
+	return false;
+}
+
+TEST(Candump, ParsesClassicAndFdLinesWithTheirTime)
+{
+	CandumpLine line;
+	ASSERT_EQ(parseCandumpLine("(1700000000.123456) can0 305#0011223344556677", &line),
+		  CandumpParse::Classic);
+	EXPECT_EQ(line.time_us, 1700000000123456);
+	EXPECT_EQ(line.frame.id, 0x305u);
+	EXPECT_EQ(line.frame.len, 8);
+	EXPECT_EQ(line.frame.data[0], 0x00);
+	EXPECT_EQ(line.frame.data[7], 0x77);
+
+	/* A short fraction is scaled (candump always writes 6 digits; others may not). */
+	ASSERT_EQ(parseCandumpLine("(12.5) vcan0 7FF#AB", &line), CandumpParse::Classic);
+	EXPECT_EQ(line.time_us, 12500000);
+	EXPECT_EQ(line.frame.id, 0x7ffu);
+	EXPECT_EQ(line.frame.len, 1);
+
+	const std::string fd = "(1.000001) can0 30A##0" + std::string(128, 'E');
+	ASSERT_EQ(parseCandumpLine(fd, &line), CandumpParse::Fd);
+	EXPECT_EQ(line.fd.id, 0x30au);
+	EXPECT_EQ(line.fd.len, 64);
+	EXPECT_EQ(line.fd.data[63], 0xee);
+}
+
+TEST(Candump, NamesTruncatedAndMalformedLines)
+{
+	CandumpLine line;
+	/* Cut off: the parser runs out of characters where more was due. */
+	EXPECT_EQ(parseCandumpLine("(1700000000.123456) can0 305#00112", &line),
+		  CandumpParse::Truncated);
+	EXPECT_STRNE(line.error, "");
+	EXPECT_EQ(parseCandumpLine("(1700000000.123456) can0 30", &line), CandumpParse::Truncated);
+	EXPECT_EQ(parseCandumpLine("(1700000000.12", &line), CandumpParse::Truncated);
+	/* A character with no place there. */
+	EXPECT_EQ(parseCandumpLine("hello world", &line), CandumpParse::Malformed);
+	EXPECT_EQ(parseCandumpLine("(1700000000.123456) can0 305#00ZZ", &line),
+		  CandumpParse::Malformed);
+	EXPECT_EQ(parseCandumpLine("(1700000000.123456) can0 305#001122334455667788", &line),
+		  CandumpParse::Malformed);
+	EXPECT_EQ(parseCandumpLine("(1700000000.123456) can0 805#00", &line),
+		  CandumpParse::Malformed);
+	/* Never ours: extended ids and remote frames; empty lines. */
+	EXPECT_EQ(parseCandumpLine("(1.0) can0 00000305#0011223344556677", &line),
+		  CandumpParse::Ignored);
+	EXPECT_EQ(parseCandumpLine("(1.0) can0 305#R", &line), CandumpParse::Ignored);
+	EXPECT_EQ(parseCandumpLine("", &line), CandumpParse::Ignored);
+	EXPECT_STREQ(tool::candumpParseName(CandumpParse::Truncated), "truncated log line");
+	EXPECT_STREQ(tool::candumpParseName(CandumpParse::Malformed), "malformed log line");
+}
+
+TEST(ViewState, DecodesReportsIntoWhatThePageShows)
+{
+	ViewState state;
+	can::Encoder encoder;
+	const int count = 10;
+	const std::int64_t last =
+		feedReports(&state, &encoder, count, kPeriodUs, can::fault::kStrobeError);
+	const json s = state.stateJson(last + 1000);
+
+	const can::PoseData want = poseAt(count - 1);
+	ASSERT_TRUE(s["t_mm"].is_array()) << s.dump();
+	for (int i = 0; i < 3; ++i) {
+		EXPECT_NEAR(s["t_mm"][i].get<double>(), want.t_mm[i], 0.05 + 1e-9) << i;
+		EXPECT_NEAR(s["rpy_deg"][i].get<double>(), want.rpy_deg[i], 0.005 + 1e-9) << i;
+		/* σ is sent rounded up: never below what was sent, within a step. */
+		EXPECT_GE(s["sigma_t_mm"][i].get<double>(), want.sigma_t_mm[i] - 1e-9);
+		EXPECT_LE(s["sigma_t_mm"][i].get<double>(), want.sigma_t_mm[i] + 0.1 + 1e-9);
+	}
+	EXPECT_EQ(s["frame"], want.frame_counter);
+	EXPECT_EQ(s["state"], "TRACKING");
+	EXPECT_EQ(s["faults"], json::array({ "STROBE_ERROR" }));
+	EXPECT_EQ(s["fault_bits"], can::fault::kStrobeError);
+	EXPECT_EQ(s["leds"], 7);
+	EXPECT_NEAR(s["rms_px"].get<double>(), 0.23, 1e-9);
+	EXPECT_NEAR(s["log10_nfa"].get<double>(), -12.3, 1e-9);
+	EXPECT_TRUE(s["pose_valid"].get<bool>());
+	EXPECT_NEAR(s["rate_hz"].get<double>(), 1e6 / kPeriodUs, 0.1);
+	EXPECT_NEAR(s["age_ms"].get<double>(), 1.0, 1e-9);
+	EXPECT_FALSE(s["stale"].get<bool>());
+	EXPECT_EQ(s["counters"]["reports"], count);
+	EXPECT_TRUE(s["problems"].empty()) << s["problems"].dump();
+	EXPECT_EQ(s["strobe"], "CONSTANT");
+}
+
+TEST(ViewState, StaleAfterThreePeriodsOrThreeHundredMilliseconds)
+{
+	{
+		/* 60 reports a second: 3 periods are 50 ms, so 300 ms is the bound. */
+		ViewState state;
+		can::Encoder encoder;
+		const std::int64_t last = feedReports(&state, &encoder, 10);
+		EXPECT_DOUBLE_EQ(state.stateJson(last)["stale_after_ms"].get<double>(), 300.0);
+		EXPECT_FALSE(state.stateJson(last + 290000)["stale"].get<bool>());
+		EXPECT_TRUE(state.stateJson(last + 310000)["stale"].get<bool>());
+	}
+	{
+		/* 5 reports a second: 3 periods, 600 ms. */
+		ViewState state;
+		can::Encoder encoder;
+		const std::int64_t last = feedReports(&state, &encoder, 10, 200000);
+		EXPECT_DOUBLE_EQ(state.stateJson(last)["stale_after_ms"].get<double>(), 600.0);
+		EXPECT_FALSE(state.stateJson(last + 590000)["stale"].get<bool>());
+		EXPECT_TRUE(state.stateJson(last + 610000)["stale"].get<bool>());
+	}
+	/* Nothing heard yet: stale, with no pose. */
+	const ViewState empty;
+	const json s = empty.stateJson(kT0Us);
+	EXPECT_TRUE(s["stale"].get<bool>());
+	EXPECT_TRUE(s["t_mm"].is_null());
+	EXPECT_TRUE(s["state"].is_null());
+}
+
+TEST(ViewState, NamesBadCrcAndRepeatedCounterAndKeepsTheGoodPose)
+{
+	ViewState state;
+	can::Encoder encoder;
+	std::int64_t t = feedReports(&state, &encoder, 8);
+
+	can::PoseData pose = poseAt(50);
+	pose.sensor_time_us = static_cast<std::uint32_t>(5000000 + 8 * kPeriodUs);
+	can::RawFrame out[can::kMaxReportFrames];
+	const int n = encoder.encodeReport(statusWith(0), &pose, out);
+	ASSERT_GE(n, 2);
+	t += kPeriodUs;
+	can::RawFrame bad = out[0];
+	bad.data[0] ^= 0x01; /* one bit flipped on the wire: the CRC no longer matches */
+	state.feed(bad, t);
+	state.feed(out[1], t);
+	state.feed(out[1], t); /* the same frame again: its alive counter repeats */
+	for (int i = 2; i < n; ++i)
+		state.feed(out[i], t);
+
+	const json s = state.stateJson(t);
+	EXPECT_TRUE(hasProblem(s, "bad CRC")) << s["problems"].dump();
+	EXPECT_TRUE(hasProblem(s, "stale alive counter")) << s["problems"].dump();
+	EXPECT_EQ(s["counters"]["crc_errors"], 1);
+	/* That report's pose lost a frame: not valid, and the last good pose stays shown. */
+	EXPECT_FALSE(s["pose_valid"].get<bool>());
+	EXPECT_EQ(s["frame"], poseAt(7).frame_counter);
+	EXPECT_TRUE(hasProblem(s, "incomplete pose (a pose frame missing)"))
+		<< s["problems"].dump();
+}
+
+TEST(ViewState, KeepsThirtySecondsOfPoses)
+{
+	ViewState state;
+	can::Encoder encoder;
+	/* 40 s at 5 reports a second. */
+	const std::int64_t last = feedReports(&state, &encoder, 200, 200000);
+	const json h = state.historyJson(last);
+	ASSERT_FALSE(h.empty());
+	EXPECT_GE(h.front()[0].get<double>(), -30.0);
+	EXPECT_LE(h.front()[0].get<double>(), -29.7);
+	EXPECT_DOUBLE_EQ(h.back()[0].get<double>(), 0.0);
+	EXPECT_EQ(h.back().size(), 7u);
+	EXPECT_NEAR(h.back()[1].get<double>(), poseAt(199).t_mm[0], 0.05 + 1e-6);
+}
+
+TEST(ViewState, ProtocolNamesComeFromTheHeader)
+{
+	const json p = ViewState::protocolJson();
+	ASSERT_EQ(p["fault_bits"].size(), 8u);
+	for (unsigned int bit = 0; bit < 8; ++bit)
+		EXPECT_EQ(p["fault_bits"][bit], can::faultBitName(bit));
+	EXPECT_EQ(p["states"][2], "TRACKING");
+	EXPECT_EQ(p["strobe_modes"].back(), "UNCHANGED");
+	EXPECT_EQ(p["track_modes"], json::array({ "TRACK", "SEARCH_ONLY" }));
+}
+
+TEST(Command, ThePagesCommandIsTheDpCommandASensorDecodes)
+{
+	can::CommandData cmd;
+	ASSERT_EQ(tool::commandFromJson(json::parse(R"({"enable": false, "mode": "SEARCH_ONLY",
+		"strobe": "ALTERNATE", "exposure_us": 1500, "gain": 2.5})"),
+					&cmd),
+		  "");
+	can::Encoder encoder;
+	const can::RawFrame frame = encoder.encodeCommand(cmd);
+	EXPECT_EQ(frame.id, can::kDefaultBaseId + can::kCommand);
+	can::Decoder sensor;
+	ASSERT_EQ(sensor.feed(frame), can::Decoder::Event::Command);
+	const can::CommandData &got = sensor.command();
+	EXPECT_FALSE(got.enable);
+	EXPECT_EQ(got.mode, can::TrackMode::SearchOnly);
+	EXPECT_EQ(got.strobe, can::StrobeMode::Alternate);
+	EXPECT_EQ(got.exposure_us, 1500);
+	EXPECT_NEAR(got.gain, 2.5, 1e-9);
+
+	/* Absent fields: the defaults (enabled, track, nothing else changed). */
+	can::CommandData defaults;
+	ASSERT_EQ(tool::commandFromJson(json::object(), &defaults), "");
+	EXPECT_TRUE(defaults.enable);
+	EXPECT_EQ(defaults.strobe, can::StrobeMode::Unchanged);
+	EXPECT_EQ(defaults.exposure_us, 0);
+
+	/* Each wrong field says which. */
+	const char *wrong[][2] = {
+		{ R"({"mode": "FAST"})", "mode" },
+		{ R"({"strobe": 2})", "strobe" },
+		{ R"({"exposure_us": 70000})", "exposure_us" },
+		{ R"({"gain": 30})", "gain" },
+		{ R"({"enable": "yes"})", "enable" },
+		{ R"([1, 2])", "not a JSON object" },
+	};
+	for (const auto &[text, field] : wrong) {
+		can::CommandData c;
+		const std::string error = tool::commandFromJson(json::parse(text), &c);
+		EXPECT_NE(error.find(field), std::string::npos) << text << ": " << error;
+	}
+}
+
+class Follower : public ::testing::Test
+{
+protected:
+	void SetUp() override
+	{
+		char dir_template[] = "/tmp/view-test.XXXXXX";
+		ASSERT_NE(mkdtemp(dir_template), nullptr);
+		dir_ = dir_template;
+		path_ = dir_ + "/can.log";
+	}
+	void TearDown() override { (void)std::system(("rm -rf '" + dir_ + "'").c_str()); }
+
+	void append(const std::string &text)
+	{
+		std::ofstream f(path_, std::ios::app);
+		f << text;
+	}
+	std::string dir_, path_;
+};
+
+/* candump -L lines of `count` reports at 60 a second from kT0Us. */
+std::string reportLines(can::Encoder *encoder, int first, int count)
+{
+	std::string text;
+	for (int k = first; k < first + count; ++k) {
+		can::PoseData pose = poseAt(k);
+		can::RawFrame out[can::kMaxReportFrames];
+		const int n = encoder->encodeReport(statusWith(0), &pose, out);
+		const std::int64_t t = kT0Us + k * kPeriodUs;
+		for (int i = 0; i < n; ++i) {
+			char line[80];
+			int m = std::snprintf(line, sizeof(line), "(%lld.%06lld) can0 %03X#",
+					      static_cast<long long>(t / 1000000),
+					      static_cast<long long>(t % 1000000),
+					      static_cast<unsigned int>(out[i].id));
+			for (int b = 0; b < 8; ++b)
+				m += std::snprintf(line + m,
+						   sizeof(line) - static_cast<std::size_t>(m),
+						   "%02X",
+						   out[i].data[static_cast<std::size_t>(b)]);
+			text += std::string(line) + "\n";
+		}
+	}
+	return text;
+}
+
+TEST_F(Follower, FollowsTheLogAsItGrowsAndNamesBadLines)
+{
+	ViewState state;
+	can::Encoder encoder;
+	append(reportLines(&encoder, 0, 6));
+	tool::CandumpFollower follower(path_, &state);
+	EXPECT_EQ(follower.poll(), 6 * 7);
+	EXPECT_EQ(state.stateJson(kT0Us)["frame"], poseAt(5).frame_counter);
+
+	/* A report whose last line is half written: nothing of that line is taken yet. */
+	const std::string more = reportLines(&encoder, 6, 1);
+	const std::size_t cut = more.size() - 10;
+	append(more.substr(0, cut));
+	EXPECT_EQ(follower.poll(), 6);
+	EXPECT_EQ(state.stateJson(kT0Us)["counters"]["reports"], 6);
+	append(more.substr(cut));
+	EXPECT_EQ(follower.poll(), 1);
+	json s = state.stateJson(kT0Us);
+	EXPECT_EQ(s["counters"]["reports"], 7);
+	EXPECT_EQ(s["frame"], poseAt(6).frame_counter);
+	EXPECT_TRUE(s["problems"].empty()) << s["problems"].dump();
+
+	/* A garbage line and a cut one: named, with their line numbers; the follower goes on. */
+	append("this is not candump\n(1700000000.5) can0 305#001\n");
+	append(reportLines(&encoder, 7, 1));
+	follower.poll();
+	s = state.stateJson(kT0Us);
+	EXPECT_TRUE(hasProblem(s, "malformed log line")) << s["problems"].dump();
+	EXPECT_TRUE(hasProblem(s, "truncated log line")) << s["problems"].dump();
+	for (const json &p : s["problems"]) {
+		if (p["name"] == "malformed log line") {
+			EXPECT_NE(p["detail"].get<std::string>().find("line 50"), std::string::npos)
+				<< p.dump();
+		}
+	}
+	EXPECT_EQ(s["frame"], poseAt(7).frame_counter);
+
+	/* The log truncated (a new run): read again from its start. */
+	{
+		std::ofstream f(path_, std::ios::trunc);
+	}
+	can::Encoder encoder2;
+	append(reportLines(&encoder2, 20, 5));
+	follower.poll();
+	s = state.stateJson(kT0Us);
+	EXPECT_TRUE(hasProblem(s, "CAN log")) << s["problems"].dump();
+	EXPECT_EQ(s["frame"], poseAt(24).frame_counter);
+}
+
+TEST_F(Follower, AMissingLogIsAProblemUntilItAppears)
+{
+	ViewState state;
+	tool::CandumpFollower follower(path_, &state);
+	EXPECT_EQ(follower.poll(), 0);
+	const json s = state.stateJson(kT0Us);
+	ASSERT_TRUE(hasProblem(s, "CAN log")) << s["problems"].dump();
+	EXPECT_NE(s["problems"][0]["detail"].get<std::string>().find("No such file"),
+		  std::string::npos);
+	EXPECT_FALSE(s["problems"][0]["resolved"].get<bool>());
+
+	/* The log appears (the daemon opened its bus): read within a second, the problem resolved. */
+	can::Encoder encoder;
+	append(reportLines(&encoder, 0, 6));
+	usleep(1100000);
+	EXPECT_EQ(follower.poll(), 6 * 7);
+	const json after = state.stateJson(kT0Us);
+	EXPECT_EQ(after["frame"], poseAt(5).frame_counter);
+	EXPECT_TRUE(after["problems"][0]["resolved"].get<bool>()) << after["problems"].dump();
+}
+
+} /* namespace */
