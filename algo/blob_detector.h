@@ -81,8 +81,16 @@ struct BlobFilterConfig {
 	int min_area_px = 2;
 	/* Larger components are not LED spots; 0 = 1/200 of the frame. */
 	int max_area_px = 0;
-	/* sigma_major / sigma_minor above this is a glint, not an LED. */
-	double max_elongation = 4.0;
+	/*
+	 * sigma_major / sigma_minor above this is a glint, not an LED. A spot of
+	 * PSF sigma s drawn out by a motion of L px during the exposure has
+	 * sqrt(L^2 / 12 + s^2) / s: 12 keeps streaks of up to ~41 s (33 px at
+	 * s = 0.8 px), whose centroid is still the LED's mid-exposure place. The
+	 * paper's 4 dropped every streak longer than ~13 s (11 px). A glint kept as a
+	 * candidate costs search time, never safety: the false-alarm bound
+	 * counts every candidate.
+	 */
+	double max_elongation = 12.0;
 	/* Fill ratio below this is too sparse for an LED spot. */
 	double min_fill = 0.25;
 	/* Gaps of up to this many pixels inside a row are filled (closing). */

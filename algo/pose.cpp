@@ -164,8 +164,8 @@ bool solveFourCoplanar(const Eigen::Vector3d model_mm[4], const Eigen::Vector2d 
 		}
 	}
 	Eigen::Vector3d normal = Eigen::Vector3d::Zero();
-	for (int m = 0; m < 4; ++m)
-		normal += c[m].dot(c[best]) >= 0.0 ? c[m] : Eigen::Vector3d(-c[m]);
+	for (const Eigen::Vector3d &cm : c)
+		normal += cm.dot(c[best]) >= 0.0 ? cm : Eigen::Vector3d(-cm);
 	const double normal_norm = normal.norm();
 
 	double model_d2 = 0.0, image_d2 = 0.0;
