@@ -717,7 +717,28 @@ void Daemon::applyCommand(const can::CommandData &command)
 			exposure_us, gain, period_us);
 		return;
 	}
+	/* The preview: 3 is reserved; on needs the ring, opened now if it is not yet (allocates:
+	 * a command, not a frame). */
+	if (command.preview == can::PreviewSwitch::Reserved ||
+	    (command.preview == can::PreviewSwitch::On && !preview_.isOpen() && !startPreview())) {
+		++stats_.commands_rejected;
+		command_rejected_.raise(hal::monotonicNs());
+		std::fprintf(log_, "dockposed: command rejected: preview %s\n",
+			     command.preview == can::PreviewSwitch::Reserved
+				     ? "3 is reserved"
+				     : "on, but its ring cannot be opened");
+		return;
+	}
 	++stats_.commands;
+
+	if (command.preview != can::PreviewSwitch::Unchanged) {
+		const bool on = command.preview == can::PreviewSwitch::On;
+		if (on != preview_on_) {
+			preview_on_ = on;
+			preview_count_ = preview_every_ - 1; /* on: the next frame goes out */
+			std::fprintf(log_, "dockposed: command: preview %s\n", on ? "on" : "off");
+		}
+	}
 
 	if (exposure_us != exposure_us_ || gain != gain_) {
 		if (auto s = backends_.camera->setControls(exposure_us, gain); s) {
