@@ -152,7 +152,8 @@ hal::Status Daemon::start()
 	if (auto s = backends_.camera->start(); !s)
 		return hal::Status::error("camera: " + s.message());
 
-	startPreview();
+	if (config_.preview.enabled)
+		startPreview();
 
 	start_ns_ = hal::monotonicNs();
 	last_frame_ns_ = start_ns_;
@@ -188,13 +189,19 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 		backends_.strobe_control->kick();
 		handleCommands();
 
+		/* The frame the preview worker is done with goes back to the camera. */
+		if (hal::Frame done; preview_worker_.reclaim(&done))
+			backends_.camera->releaseFrame(done);
+
 		hal::Frame frame;
 		const std::int64_t wait_start_ns = now_ns;
 		const hal::WaitResult result = backends_.camera->waitFrame(&frame, kWaitSliceMs);
 		now_ns = hal::monotonicNs();
 		if (result == hal::WaitResult::Frame) {
+			frame_held_ = false;
 			handleFrame(frame, now_ns);
-			backends_.camera->releaseFrame(frame);
+			if (!frame_held_)
+				backends_.camera->releaseFrame(frame);
 		} else if (result == hal::WaitResult::Stopped && !stalled_) {
 			/* Not running without a stall under way: a replay ran out of frames. (During a
 			 * stall it is a camera whose restart failed: handled as the stall.) */
@@ -282,6 +289,8 @@ void Daemon::shutdown()
 	}
 	backends_.can->poll();
 
+	preview_worker_.stop();
+	drainPreview();
 	backends_.camera->stop();
 	backends_.can->close();
 	backends_.strobe->close();
@@ -319,13 +328,29 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 	/* State machine → encoder → CAN. */
 	reportFrame(frame, result);
 
-	/* Every Nth frame to the operator preview (after the report: it never delays one). */
-	if (preview_.isOpen() && ++preview_count_ >= preview_every_) {
+	/* Every Nth frame to the operator preview (after the report: it never delays one). The
+	 * worker downscales it on its own thread, holding the frame; busy, the frame is skipped. */
+	if (preview_on_ && preview_.isOpen() && ++preview_count_ >= preview_every_) {
 		preview_count_ = 0;
-		preview_.publish(
-			frame.image, frame.sequence, frame.timestamp_ns, *pipeline_, result,
-			{ static_cast<std::uint8_t>(state_machine_.state()), last_faults_ });
+		const PreviewStatus status{ static_cast<std::uint8_t>(state_machine_.state()),
+					    last_faults_ };
+		if (!preview_worker_.running()) {
+			preview_.publish(frame.image, frame.sequence, frame.timestamp_ns,
+					 *pipeline_, result, status);
+			++stats_.preview_frames;
+		} else if (preview_worker_.submit(frame, *pipeline_, result, status)) {
+			frame_held_ = true;
+			++stats_.preview_frames;
+		} else {
+			++stats_.preview_skipped;
+		}
 	}
+}
+
+void Daemon::drainPreview()
+{
+	if (hal::Frame held; preview_worker_.drain(&held))
+		backends_.camera->releaseFrame(held);
 }
 
 /* The frame's bookkeeping. False: the frame is not of the camera model's size (counted). */
@@ -510,6 +535,7 @@ void Daemon::handleStall(std::int64_t now_ns)
 	/* Try to bring the camera back. */
 	if (now_ns - last_restart_ns_ >= kRestartIntervalNs) {
 		last_restart_ns_ = now_ns;
+		drainPreview();
 		backends_.camera->stop();
 		if (auto s = backends_.camera->start(); s) {
 			++stats_.camera_restarts;
@@ -621,23 +647,32 @@ hal::Status Daemon::startAuthentication()
 
 /* preview.enabled: the shared-memory ring, every Nth frame. Optional: a preview that cannot be
  * set up is said once and left off; the sensor runs without it. */
-void Daemon::startPreview()
+bool Daemon::startPreview()
 {
-	if (!config_.preview.enabled)
-		return;
 	const auto &k = pipeline_->camera().intrinsics();
 	if (auto s = preview_.open(config_.preview.name, k.width, k.height, config_.preview.width);
 	    !s) {
 		std::fprintf(log_, "dockposed: %s; running without it\n", s.message().c_str());
-		return;
+		return false;
+	}
+	preview_on_ = true;
+	/* The worker holds one camera buffer while it downscales: only with two more capturing. */
+	bool worker = false;
+	if (config_.camera.buffer_count >= 3) {
+		if (auto s = preview_worker_.start(&preview_); s)
+			worker = true;
+		else
+			std::fprintf(log_, "dockposed: %s; publishing in the frame loop\n",
+				     s.message().c_str());
 	}
 	preview_every_ = std::max(
 		1, static_cast<int>(std::ceil(
 			   config_.camera.frame_rate_hz / config_.preview.rate_hz - 1e-9)));
 	preview_count_ = preview_every_ - 1; /* the first frame goes out */
-	std::fprintf(log_, "dockposed: preview /dev/shm/%s: every %d frames, %dx%d px\n",
+	std::fprintf(log_, "dockposed: preview /dev/shm/%s: every %d frames, %dx%d px, %s\n",
 		     config_.preview.name.c_str(), preview_every_, preview_.width(),
-		     preview_.height());
+		     preview_.height(), worker ? "on a worker thread" : "in the frame loop");
+	return true;
 }
 
 void Daemon::handleCommands()
@@ -682,7 +717,28 @@ void Daemon::applyCommand(const can::CommandData &command)
 			exposure_us, gain, period_us);
 		return;
 	}
+	/* The preview: 3 is reserved; on needs the ring, opened now if it is not yet (allocates:
+	 * a command, not a frame). */
+	if (command.preview == can::PreviewSwitch::Reserved ||
+	    (command.preview == can::PreviewSwitch::On && !preview_.isOpen() && !startPreview())) {
+		++stats_.commands_rejected;
+		command_rejected_.raise(hal::monotonicNs());
+		std::fprintf(log_, "dockposed: command rejected: preview %s\n",
+			     command.preview == can::PreviewSwitch::Reserved
+				     ? "3 is reserved"
+				     : "on, but its ring cannot be opened");
+		return;
+	}
 	++stats_.commands;
+
+	if (command.preview != can::PreviewSwitch::Unchanged) {
+		const bool on = command.preview == can::PreviewSwitch::On;
+		if (on != preview_on_) {
+			preview_on_ = on;
+			preview_count_ = preview_every_ - 1; /* on: the next frame goes out */
+			std::fprintf(log_, "dockposed: command: preview %s\n", on ? "on" : "off");
+		}
+	}
 
 	if (exposure_us != exposure_us_ || gain != gain_) {
 		if (auto s = backends_.camera->setControls(exposure_us, gain); s) {

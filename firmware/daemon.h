@@ -41,6 +41,7 @@
 #include "firmware/fault_hold.h"
 #include "firmware/latency_histogram.h"
 #include "firmware/preview.h"
+#include "firmware/preview_worker.h"
 #include "firmware/protocol/dockpose_can.h"
 #include "firmware/protocol/dockpose_can_cmac.h"
 #include "firmware/state_machine.h"
@@ -67,6 +68,8 @@ struct DaemonStats {
 	std::uint64_t commands = 0; /* command frames applied */
 	std::uint64_t commands_rejected = 0; /* command frames with bad CRC/length/values */
 	std::uint64_t can_send_drops = 0; /* sends that dropped an older queued frame */
+	std::uint64_t preview_frames = 0; /* preview frames published, or handed to the worker */
+	std::uint64_t preview_skipped = 0; /* preview frames skipped: the worker was busy */
 	LatencyHistogram latency; /* sensor timestamp -> CAN send, per report */
 	LatencyHistogram pipeline; /* time in Pipeline::process, per processed frame */
 	double run_s = 0.0;
@@ -136,7 +139,10 @@ private:
 	void logState(SensorState before, SensorState after, std::uint64_t sequence);
 	void updateSystemdStatus(std::int64_t now_ns);
 	void publishStats(std::int64_t now_ns);
-	void startPreview();
+	/* Open the ring (and start its worker); false: it could not be opened (said in the log). */
+	bool startPreview();
+	/* Give back the frame the preview worker holds, waiting for it (before the camera stops). */
+	void drainPreview();
 	/* The CAN link going down (interface missing or down) or up: one log line each way. */
 	void logCanLink();
 
@@ -152,8 +158,12 @@ private:
 	std::int64_t last_reject_log_ns_ = 0;
 	std::uint64_t rejects_unlogged_ = 0;
 	SystemdNotifier notifier_;
-	/* The operator preview (preview.enabled): every preview_every_-th frame. */
+	/* The operator preview (preview.enabled, or switched on by a command): every
+	 * preview_every_-th frame, through preview_worker_ when it runs (else inline). */
 	PreviewWriter preview_;
+	PreviewWorker preview_worker_;
+	bool preview_on_ = false; /* publishing (the ring may stay open while off) */
+	bool frame_held_ = false; /* handleFrame handed the frame to preview_worker_ */
 	int preview_every_ = 1;
 	int preview_count_ = 0;
 	DaemonStats stats_; /* frame thread */

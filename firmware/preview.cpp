@@ -24,6 +24,8 @@ namespace {
 /* The bytes of a frame after its sequence: what the seqlock guards. */
 constexpr std::size_t kBodyOffset = offsetof(PreviewFrame, frame_counter);
 constexpr std::size_t kBodyBytes = sizeof(PreviewFrame) - kBodyOffset;
+/* Of those, everything but the pixels: what describe() fills. */
+constexpr std::size_t kMetaBytes = offsetof(PreviewFrame, pixels) - kBodyOffset;
 
 std::uint8_t *body(PreviewFrame *f)
 {
@@ -175,25 +177,66 @@ void PreviewWriter::publish(const ImageView &image, std::uint64_t frame_counter,
 			    std::int64_t timestamp_ns, const Pipeline &pipeline,
 			    const PoseResult *result, PreviewStatus status)
 {
-	if (!ring_ || !image.valid() || image.width / factor_ < width_ ||
-	    image.height / factor_ < height_)
+	if (!accepts(image))
 		return;
+	PreviewFrame &f = beginSlot();
+	describe(&f, frame_counter, timestamp_ns, image.width, image.height, pipeline, result,
+		 status);
+	f.published_ns = hal::monotonicNs();
+	downscaleBox(image, factor_, f.pixels, width_, height_);
+	endSlot(f);
+}
+
+bool PreviewWriter::accepts(const ImageView &image) const
+{
+	return ring_ && image.valid() && image.width / factor_ >= width_ &&
+	       image.height / factor_ >= height_;
+}
+
+PreviewFrame &PreviewWriter::beginSlot()
+{
 	const std::uint64_t n = ring_->published.load(std::memory_order_relaxed);
 	PreviewFrame &f = ring_->frame[n % kPreviewSlots];
 	const std::uint64_t seq = f.seq.load(std::memory_order_relaxed);
 	f.seq.store(seq + 1, std::memory_order_relaxed); /* odd: being written */
 	std::atomic_thread_fence(std::memory_order_release);
+	return f;
+}
 
+void PreviewWriter::endSlot(PreviewFrame &f)
+{
+	const std::uint64_t n = ring_->published.load(std::memory_order_relaxed);
+	std::atomic_thread_fence(std::memory_order_release);
+	f.seq.store(f.seq.load(std::memory_order_relaxed) + 1,
+		    std::memory_order_relaxed); /* even again: stable */
+	ring_->published.store(n + 1, std::memory_order_release);
+}
+
+void PreviewWriter::publishDescribed(const PreviewFrame &meta, const ImageView &image)
+{
+	if (!accepts(image))
+		return;
+	PreviewFrame &f = beginSlot();
+	std::memcpy(body(&f), body(&meta), kMetaBytes);
+	f.published_ns = hal::monotonicNs();
+	downscaleBox(image, factor_, f.pixels, width_, height_);
+	endSlot(f);
+}
+
+void PreviewWriter::describe(PreviewFrame *out, std::uint64_t frame_counter,
+			     std::int64_t timestamp_ns, int image_width, int image_height,
+			     const Pipeline &pipeline, const PoseResult *result,
+			     PreviewStatus status) const
+{
+	PreviewFrame &f = *out;
 	f.frame_counter = frame_counter;
 	f.timestamp_ns = timestamp_ns;
-	f.published_ns = hal::monotonicNs();
 	f.width = static_cast<std::uint16_t>(width_);
 	f.height = static_cast<std::uint16_t>(height_);
-	f.full_width = static_cast<std::uint16_t>(image.width);
-	f.full_height = static_cast<std::uint16_t>(image.height);
+	f.full_width = static_cast<std::uint16_t>(image_width);
+	f.full_height = static_cast<std::uint16_t>(image_height);
 	f.state = status.state;
 	f.faults = status.faults;
-	downscaleBox(image, factor_, f.pixels, width_, height_);
 
 	const bool found = result && result->found;
 	f.found = found ? 1 : 0;
@@ -264,10 +307,6 @@ void PreviewWriter::publish(const ImageView &image, std::uint64_t frame_counter,
 	for (std::uint32_t i = 0; i < f.face_count; ++i)
 		for (int k = 0; k < 4; ++k)
 			f.faces[i][k] = static_cast<std::uint8_t>(model.faces[i][k]);
-
-	std::atomic_thread_fence(std::memory_order_release);
-	f.seq.store(seq + 2, std::memory_order_relaxed); /* even again: stable */
-	ring_->published.store(n + 1, std::memory_order_release);
 }
 
 PreviewReader::~PreviewReader()

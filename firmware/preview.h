@@ -14,7 +14,8 @@
  * The layout is plain data of fixed size (PreviewRing), version
  * kPreviewVersion; a reader refuses another magic, version or size.
  *
- * Threads: a PreviewWriter belongs to the frame thread; a PreviewReader to
+ * Threads: a PreviewWriter belongs to one writer thread at a time (the frame
+ * thread, or the PreviewWorker's thread with describe() on the frame thread); a PreviewReader to
  * its reader's thread; any number of processes may read.
  */
 #pragma once
@@ -154,9 +155,30 @@ public:
 	void publish(const ImageView &image, std::uint64_t frame_counter, std::int64_t timestamp_ns,
 		     const Pipeline &pipeline, const PoseResult *result, PreviewStatus status);
 
+	/*
+	 * publish() in two halves, for a worker thread (firmware/preview_worker.h).
+	 * describe(): everything of a frame but its pixels and published_ns into
+	 * *out (a PreviewFrame outside the ring), from `pipeline`'s last process()
+	 * on an image_width x image_height frame; the caller's thread (it reads
+	 * the pipeline). Allocates: never.
+	 */
+	void describe(PreviewFrame *out, std::uint64_t frame_counter, std::int64_t timestamp_ns,
+		      int image_width, int image_height, const Pipeline &pipeline,
+		      const PoseResult *result, PreviewStatus status) const;
+	/*
+	 * Publish `meta` (from describe()) with `image` downscaled. Allocates:
+	 * never. The one writer thread: never at the same time as publish().
+	 */
+	void publishDescribed(const PreviewFrame &meta, const ImageView &image);
+
 	std::uint64_t published() const;
 
 private:
+	bool accepts(const ImageView &image) const;
+	/* The next slot, its sequence made odd; endSlot() makes it even and counts it. */
+	PreviewFrame &beginSlot();
+	void endSlot(PreviewFrame &f);
+
 	PreviewRing *ring_ = nullptr;
 	std::string shm_name_;
 	int factor_ = 1;

@@ -133,6 +133,13 @@ enum class StrobeMode : std::uint8_t {
 	Alternate = 2,
 	Unchanged = 3
 };
+/* DP_Command Preview: the operator preview (dockposed's shared-memory ring). */
+enum class PreviewSwitch : std::uint8_t {
+	Unchanged = 0,
+	Off = 1,
+	On = 2,
+	Reserved = 3 /* refused: COMMAND_REJECTED */
+};
 enum class TrackMode : std::uint8_t {
 	Track = 0,
 	SearchOnly = 1
@@ -409,6 +416,7 @@ struct CommandData {
 	StrobeMode strobe = StrobeMode::Unchanged;
 	std::uint16_t exposure_us = 0; /* 0: unchanged */
 	double gain = 0; /* resolution 0.1, up to 25.5; 0: unchanged */
+	PreviewSwitch preview = PreviewSwitch::Unchanged;
 };
 
 namespace detail {
@@ -835,6 +843,7 @@ private:
 			      flag(cmd.enable, 0) |
 				      field(static_cast<std::uint64_t>(cmd.mode), 1, 1) |
 				      field(static_cast<std::uint64_t>(cmd.strobe), 2, 2) |
+				      field(static_cast<std::uint64_t>(cmd.preview), 4, 2) |
 				      field(cmd.exposure_us, 8, 16) |
 				      signedField(toRaw(cmd.gain, kGainRes, 0, 255, 0), 24, 8));
 	}
@@ -1296,6 +1305,7 @@ private:
 		cmd.enable = bits(d, 0, 1) != 0;
 		cmd.mode = static_cast<TrackMode>(bits(d, 1, 1));
 		cmd.strobe = static_cast<StrobeMode>(bits(d, 2, 2));
+		cmd.preview = static_cast<PreviewSwitch>(bits(d, 4, 2));
 		cmd.exposure_us = static_cast<std::uint16_t>(bits(d, 8, 16));
 		cmd.gain = static_cast<double>(bits(d, 24, 8)) * kGainRes;
 		return cmd;

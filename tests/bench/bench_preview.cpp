@@ -6,8 +6,15 @@
  * encoding — with preview.enabled off, and on at its defaults (every 6th frame
  * at 60 frames/s, 320 px wide: a 2x2 box downscale, the blobs, the LEDs
  * projected), published into a real shared-memory ring.
- * Median of repetitions; the ratio is printed at the end.
- * Goal: per-frame time with the preview on within 5 % of it off.
+ * The preview on two ways: inline (the frame loop downscales and publishes,
+ * as before the worker), and through firmware::PreviewWorker (the frame loop
+ * describes the frame and hands it over; a thread at nice 19 downscales and
+ * publishes; the loop reclaims the frame at its next iteration, as Daemon::run
+ * does). Median of repetitions; the ratios, measured in this one run, are
+ * printed at the end.
+ * Goal: per-frame time of the frame loop with the preview on within 5 % of it
+ * off. The worker's own CPU time is not in the frame loop's time: with a core
+ * to spare (2 cores, the frame loop on one) it runs beside the loop.
  */
 #include <unistd.h>
 
@@ -22,6 +29,7 @@
 #include "algo/pipeline.h"
 #include "algo/synth/renderer.h"
 #include "firmware/preview.h"
+#include "firmware/preview_worker.h"
 #include "firmware/protocol/dockpose_can.h"
 #include "tests/bench/ratio_reporter.h"
 
@@ -63,10 +71,19 @@ const Fixture &fixture()
 	return f;
 }
 
+enum class PreviewPath {
+	Off,
+	Inline,
+	Worker
+};
+
 /* One frame of the loop's work: pixels -> pose -> the report's frames. */
 void frameWork(Pipeline &pipeline, can::Encoder &encoder, const Image &frame,
-	       firmware::PreviewWriter *preview, int i)
+	       firmware::PreviewWriter *preview, firmware::PreviewWorker *worker, int i)
 {
+	/* As Daemon::run: the frame the worker is done with goes back (here: nowhere). */
+	if (hal::Frame done; worker)
+		benchmark::DoNotOptimize(worker->reclaim(&done));
 	const PoseResult &r = pipeline.process(frame.view());
 	can::StatusData status;
 	status.pose_valid = r.found;
@@ -75,19 +92,28 @@ void frameWork(Pipeline &pipeline, can::Encoder &encoder, const Image &frame,
 		pose.t_mm[k] = r.t_mm[k];
 	can::RawFrame out[can::kMaxReportFrames];
 	benchmark::DoNotOptimize(encoder.encodeReport(status, &pose, out));
-	if (preview && i % kPreviewEvery == 0)
-		preview->publish(frame.view(), static_cast<std::uint64_t>(i), 0, pipeline, &r,
-				 { 2, 0 });
+	if (i % kPreviewEvery == 0) {
+		if (worker) {
+			hal::Frame held;
+			held.image = frame.view();
+			held.sequence = static_cast<std::uint64_t>(i);
+			benchmark::DoNotOptimize(worker->submit(held, pipeline, &r, { 2, 0 }));
+		} else if (preview) {
+			preview->publish(frame.view(), static_cast<std::uint64_t>(i), 0, pipeline,
+					 &r, { 2, 0 });
+		}
+	}
 	benchmark::DoNotOptimize(out);
 }
 
-void frameLoop(benchmark::State &state, bool with_preview)
+void frameLoop(benchmark::State &state, PreviewPath path)
 {
 	const Fixture &f = fixture();
 	Pipeline pipeline(f.target, f.camera);
 	can::Encoder encoder;
 	firmware::PreviewWriter preview;
-	if (with_preview) {
+	firmware::PreviewWorker worker;
+	if (path != PreviewPath::Off) {
 		const std::string name = "dockpose-bench-" + std::to_string(getpid());
 		if (auto s = preview.open(name, f.camera.width, f.camera.height, kPreviewWidth);
 		    !s) {
@@ -95,22 +121,50 @@ void frameLoop(benchmark::State &state, bool with_preview)
 			return;
 		}
 	}
+	if (path == PreviewPath::Worker) {
+		if (auto s = worker.start(&preview); !s) {
+			state.SkipWithError(s.message().c_str());
+			return;
+		}
+	}
 	int i = 0;
 	for (auto _ : state) {
+		/* In the daemon the worker has 5 frame periods (83 ms at 60 frames/s) between two
+		 * preview frames; flat out here it has 5 x ~20 us, and at nice 19 on a loaded machine
+		 * it would skip nearly every frame, which would measure the skip. So before each
+		 * preview frame, outside the timed region, the worker finishes the last one; the
+		 * same pause in all three loops, so its overhead is the same in each. */
+		if (i % kPreviewEvery == 0) {
+			state.PauseTiming();
+			if (hal::Frame done; path == PreviewPath::Worker)
+				benchmark::DoNotOptimize(worker.drain(&done));
+			state.ResumeTiming();
+		}
 		frameWork(pipeline, encoder, f.frames[static_cast<std::size_t>(i % kFrames)],
-			  with_preview ? &preview : nullptr, i);
+			  path == PreviewPath::Inline ? &preview : nullptr,
+			  path == PreviewPath::Worker ? &worker : nullptr, i);
 		++i;
+	}
+	worker.stop();
+	if (path == PreviewPath::Worker) {
+		state.counters["skipped"] = static_cast<double>(worker.skipped());
+		state.counters["handed"] = static_cast<double>(worker.handed());
 	}
 }
 
 void frameLoopPreviewOff(benchmark::State &state)
 {
-	frameLoop(state, false);
+	frameLoop(state, PreviewPath::Off);
 }
 
-void frameLoopPreviewOn(benchmark::State &state)
+void frameLoopPreviewInline(benchmark::State &state)
 {
-	frameLoop(state, true);
+	frameLoop(state, PreviewPath::Inline);
+}
+
+void frameLoopPreviewWorker(benchmark::State &state)
+{
+	frameLoop(state, PreviewPath::Worker);
 }
 
 } /* namespace */
@@ -119,7 +173,11 @@ BENCHMARK(frameLoopPreviewOff)
 	->Repetitions(9)
 	->ReportAggregatesOnly(true)
 	->Unit(benchmark::kMicrosecond);
-BENCHMARK(frameLoopPreviewOn)
+BENCHMARK(frameLoopPreviewInline)
+	->Repetitions(9)
+	->ReportAggregatesOnly(true)
+	->Unit(benchmark::kMicrosecond);
+BENCHMARK(frameLoopPreviewWorker)
 	->Repetitions(9)
 	->ReportAggregatesOnly(true)
 	->Unit(benchmark::kMicrosecond);
@@ -130,12 +188,26 @@ int main(int argc, char **argv)
 	bench::RatioReporter reporter;
 	benchmark::RunSpecifiedBenchmarks(&reporter);
 	auto &m = reporter.median_us;
-	if (m.count("frameLoopPreviewOff") && m.count("frameLoopPreviewOn")) {
-		const double off = m["frameLoopPreviewOff"], on = m["frameLoopPreviewOn"];
-		std::printf("\nmedian per 640x480 frame: preview off %.2f us, on (every %d frames, "
-			    "%d px) %.2f us\n",
-			    off, kPreviewEvery, kPreviewWidth, on);
-		std::printf("ratio preview on/off: %.3f (goal <= 1.05)\n", on / off);
+	if (m.count("frameLoopPreviewOff") && m.count("frameLoopPreviewInline") &&
+	    m.count("frameLoopPreviewWorker")) {
+		const double off = m["frameLoopPreviewOff"];
+		const double inl = m["frameLoopPreviewInline"];
+		const double worker = m["frameLoopPreviewWorker"];
+		std::printf("\nmedian per 640x480 frame loop iteration: preview off %.2f us; on "
+			    "(every %d frames, %d px) inline %.2f us, worker %.2f us\n",
+			    off, kPreviewEvery, kPreviewWidth, inl, worker);
+		std::printf("ratio preview inline/off: %.3f\n", inl / off);
+		std::printf("ratio preview worker/off: %.3f (goal <= 1.05; the worker's own CPU "
+			    "is on another core, not in this figure)\n",
+			    worker / off);
+		/* Wall time counts the loop's thread preempted by other load; its CPU time not. */
+		auto &c = reporter.median_cpu_us;
+		std::printf("frame loop thread CPU: off %.2f us, inline %.2f us, worker %.2f us; "
+			    "ratio inline/off %.3f, worker/off %.3f\n",
+			    c["frameLoopPreviewOff"], c["frameLoopPreviewInline"],
+			    c["frameLoopPreviewWorker"],
+			    c["frameLoopPreviewInline"] / c["frameLoopPreviewOff"],
+			    c["frameLoopPreviewWorker"] / c["frameLoopPreviewOff"]);
 	}
 	benchmark::Shutdown();
 	return 0;

@@ -21,10 +21,15 @@ public:
 	{
 		ConsoleReporter::ReportRuns(runs);
 		for (const Run &run : runs)
-			if (run.run_type == Run::RT_Aggregate && run.aggregate_name == "median")
+			if (run.run_type == Run::RT_Aggregate && run.aggregate_name == "median") {
 				median_us[run.run_name.function_name] = run.GetAdjustedRealTime();
+				median_cpu_us[run.run_name.function_name] =
+					run.GetAdjustedCPUTime();
+			}
 	}
 	std::map<std::string, double> median_us;
+	/* The benchmark thread's CPU time (other threads, e.g. a worker, not included). */
+	std::map<std::string, double> median_cpu_us;
 };
 
 } /* namespace dockpose::bench */

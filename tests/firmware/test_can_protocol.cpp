@@ -504,7 +504,9 @@ TEST(CanProtocol, HeartbeatAndCommandRoundTrip)
 	cmd.strobe = StrobeMode::Unchanged;
 	cmd.exposure_us = 54321;
 	cmd.gain = 12.3;
+	cmd.preview = PreviewSwitch::On;
 	ASSERT_EQ(dec.feed(enc.encodeCommand(cmd)), Event::Command);
+	EXPECT_EQ(dec.command().preview, PreviewSwitch::On);
 	EXPECT_EQ(dec.command().enable, false);
 	EXPECT_EQ(dec.command().mode, TrackMode::SearchOnly);
 	EXPECT_EQ(dec.command().strobe, StrobeMode::Unchanged);
@@ -514,7 +516,9 @@ TEST(CanProtocol, HeartbeatAndCommandRoundTrip)
 	cmd.mode = TrackMode::Track;
 	cmd.strobe = StrobeMode::Constant;
 	cmd.gain = 0;
+	cmd.preview = PreviewSwitch::Reserved; /* decoded as sent: the daemon refuses it */
 	ASSERT_EQ(dec.feed(enc.encodeCommand(cmd)), Event::Command);
+	EXPECT_EQ(dec.command().preview, PreviewSwitch::Reserved);
 	EXPECT_EQ(dec.command().enable, true);
 	EXPECT_EQ(dec.command().mode, TrackMode::Track);
 	EXPECT_EQ(dec.command().strobe, StrobeMode::Constant);
@@ -1167,6 +1171,7 @@ protected:
 				cmd.strobe = StrobeMode::Alternate;
 				cmd.exposure_us = 1500;
 				cmd.gain = 4.5;
+				cmd.preview = PreviewSwitch::Off;
 				const RawFrame f = arm.encodeCommand(cmd);
 				log << candumpLine(t + 0.002, f);
 				frames_.push_back(f);
@@ -1294,6 +1299,7 @@ protected:
 				EXPECT_EQ((raw["Enable"].get<int>() != 0), true);
 				EXPECT_EQ(raw["Mode"].get<int>(), 1);
 				EXPECT_EQ(raw["StrobeMode"].get<int>(), 2);
+				EXPECT_EQ(raw["Preview"].get<int>(), 1);
 				EXPECT_EQ(raw["ExposureUs"].get<int>(), 1500);
 				EXPECT_NEAR(val("Gain"), 4.5, 0.05 + 1e-9);
 				break;

@@ -9,6 +9,7 @@
  * camera's own frame count, and poses with the trajectory's truth.
  */
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
@@ -28,6 +29,7 @@
 #include "firmware/can_frames.h"
 #include "firmware/config.h"
 #include "firmware/daemon.h"
+#include "firmware/preview.h"
 #include "firmware/protocol/dockpose_can.h"
 #include "firmware/protocol/dockpose_can_cmac.h"
 #include "hal/clock.h"
@@ -363,6 +365,57 @@ TEST(Daemon, CommandFramesChangeModeStrobeAndEnable)
 	rig.stop();
 	EXPECT_GE(rig.daemon_->stats().commands, 3u);
 	EXPECT_GE(rig.daemon_->stats().commands_rejected, 1u);
+}
+
+/* DP_Command's Preview: on (from a board whose preview.enabled is false) opens the ring and
+ * frames are published; off stops them (the ring stays); 3 is reserved and rejected. */
+TEST(Daemon, ACommandSwitchesThePreviewOnAndOff)
+{
+	BoardConfig config = simConfig();
+	config.camera.synthetic.loop = true;
+	config.preview.enabled = false;
+	config.preview.name = "dockpose-test-daemon-cmd-" + std::to_string(getpid());
+	Rig rig(config);
+	rig.start();
+	ASSERT_TRUE(rig.waitFor([&] { return rig.daemon_->stats().frames >= 10; }, 60s));
+	PreviewReader reader;
+	EXPECT_FALSE(reader.open(config.preview.name).isOk()) << "no ring before the command";
+
+	can::CommandData on;
+	on.preview = can::PreviewSwitch::On;
+	rig.sendCommand(on);
+	ASSERT_TRUE(rig.waitFor([&] { return rig.daemon_->stats().preview_frames >= 3; }, 60s))
+		<< "preview on: no frames published";
+	ASSERT_TRUE(reader.open(config.preview.name).isOk()) << "the ring appeared";
+	auto got = std::make_unique<PreviewFrame>();
+	ASSERT_TRUE(rig.waitFor([&] { return reader.latest(got.get()) >= 3; }, 10s));
+	EXPECT_EQ(got->width, 320);
+
+	can::CommandData off;
+	off.preview = can::PreviewSwitch::Off;
+	rig.sendCommand(off);
+	/* Once the command is applied (counted), a frame or so may still be in the worker. */
+	const std::uint64_t commands = rig.daemon_->stats().commands;
+	ASSERT_TRUE(rig.waitFor([&] { return rig.daemon_->stats().commands > commands; }, 10s));
+	std::this_thread::sleep_for(200ms);
+	const std::uint64_t stopped_at = reader.latest(got.get());
+	const std::uint64_t frames_then = rig.daemon_->stats().frames;
+	ASSERT_TRUE(
+		rig.waitFor([&] { return rig.daemon_->stats().frames >= frames_then + 30; }, 60s));
+	EXPECT_EQ(reader.latest(got.get(), stopped_at), 0u) << "preview off: nothing published";
+
+	can::CommandData reserved;
+	reserved.preview = can::PreviewSwitch::Reserved;
+	const std::uint64_t rejected = rig.daemon_->stats().commands_rejected;
+	rig.sendCommand(reserved);
+	ASSERT_TRUE(rig.waitFor([&] { return rig.daemon_->stats().commands_rejected > rejected; },
+				10s));
+
+	rig.sendCommand(on);
+	ASSERT_TRUE(rig.waitFor([&] { return reader.latest(got.get(), stopped_at) > 0; }, 60s))
+		<< "preview on again: frames again";
+	rig.stop();
+	EXPECT_EQ(rig.exit_status_, 0);
 }
 
 TEST(Daemon, CameraStallReportsFaultAndSwitchesTheLedOff)

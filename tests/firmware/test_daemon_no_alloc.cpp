@@ -50,7 +50,7 @@ TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
 	BoardConfig config = loaded.config;
 	config.systemd.notify = false;
 	config.camera.synthetic.loop = true;
-	/* The operator preview on: its publication is part of the frame loop. */
+	/* The operator preview on: handed to its worker thread (counted too: the whole process). */
 	config.preview.enabled = true;
 	config.preview.name = "dockpose-test-noalloc-" + std::to_string(getpid());
 
@@ -70,11 +70,13 @@ TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
 	std::this_thread::sleep_for(1500ms);
 	const std::uint64_t frames_before = daemon.stats().frames;
 	const std::uint64_t poses_before = daemon.stats().poses_valid;
+	const std::uint64_t previews_before = daemon.stats().preview_frames;
 	test::armAllocationCounter();
 	std::this_thread::sleep_for(1000ms);
 	const long allocations = test::disarmAllocationCounter();
 	const std::uint64_t frames = daemon.stats().frames - frames_before;
 	const std::uint64_t poses = daemon.stats().poses_valid - poses_before;
+	const std::uint64_t previews = daemon.stats().preview_frames - previews_before;
 
 	stop = true;
 	loop.join();
@@ -82,6 +84,7 @@ TEST(DaemonNoAlloc, FrameLoopAllocatesNothingInSteadyState)
 
 	ASSERT_GT(frames, 20u) << "the loop did not run";
 	EXPECT_GT(poses, frames / 2) << "steady state means tracking";
+	EXPECT_GT(previews, 0u) << "the preview published in the window";
 	EXPECT_EQ(allocations, 0) << allocations << " allocations over " << frames << " frames";
 }
 

@@ -158,10 +158,10 @@ inline bool samePayload(const can::RawFrame &a, const can::RawFrame &b, std::uin
 	return ((wa ^ wb) & ~unused) == 0;
 }
 
-/* Bits no signal uses (docs/can-protocol.md): command bits 4..7, 32..47. The heartbeat's bit 31
+/* Bits no signal uses (docs/can-protocol.md): command bits 6..7, 32..47. The heartbeat's bit 31
  * (Authenticated) is the encoder's own state, not a decoded value: left out too. */
 constexpr std::uint64_t kHeartbeatUnused = std::uint64_t{ 1 } << 31;
-constexpr std::uint64_t kCommandUnused = (std::uint64_t{ 0xf } << 4) |
+constexpr std::uint64_t kCommandUnused = (std::uint64_t{ 0x3 } << 6) |
 					 (std::uint64_t{ 0xffff } << 32);
 
 /*

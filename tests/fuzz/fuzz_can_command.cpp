@@ -109,6 +109,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t *data, std::size_t size
 					   static_cast<std::size_t>(*strobe) <
 						   board::kStrobeModeNames.size(),
 				   "a commanded strobe is a board mode with a name");
+		FUZZ_CHECK(static_cast<unsigned int>(cmd.preview) == ((raw.data[0] >> 4) & 0x03u),
+			   "the preview switch is bits 4-5 (3, reserved, the daemon refuses)");
 	}
 	return 0;
 }
