@@ -12,9 +12,20 @@
 #     under its own prefix. The tags, the aliases and the cache's place are scripts/libcamera-build's.
 set(DOCKPOSE_LIBCAMERA "" CACHE STRING
 	"libcamera to build against: empty for the system's, else a tag or alias of scripts/libcamera-build (lc05, lc07)")
-set(DOCKPOSE_LIBCAMERA_PREFIX "" CACHE INTERNAL "Prefix of the libcamera scripts/libcamera-build made")
+# A tree whose DOCKPOSE_LIBCAMERA changes looks libcamera up again: FindPkgConfig keeps its
+# results (and the library files it found) in the cache and would not notice the other
+# pkg-config path.
+if(NOT "${DOCKPOSE_LIBCAMERA}" STREQUAL "${_DOCKPOSE_LIBCAMERA_LOOKED_UP}")
+	get_cmake_property(_dockpose_cache_variables CACHE_VARIABLES)
+	foreach(variable IN LISTS _dockpose_cache_variables)
+		if(variable MATCHES "^(__pkg_config_checked_|pkgcfg_lib_)(DOCKPOSE_VM_|DOCKPOSE_DEB_)?LIBCAMERA")
+			unset(${variable} CACHE)
+		endif()
+	endforeach()
+	set(_DOCKPOSE_LIBCAMERA_LOOKED_UP "${DOCKPOSE_LIBCAMERA}" CACHE INTERNAL "")
+endif()
 if(NOT DOCKPOSE_LIBCAMERA)
-	set(DOCKPOSE_LIBCAMERA_PREFIX "" CACHE INTERNAL "")
+	set(DOCKPOSE_LIBCAMERA_PREFIX "" CACHE INTERNAL "Prefix of the libcamera scripts/libcamera-build made")
 	return()
 endif()
 if(CMAKE_SYSTEM_PROCESSOR MATCHES "^(aarch64|arm64)$")
@@ -36,7 +47,8 @@ if(NOT _dockpose_libcamera_rc EQUAL 0 OR NOT EXISTS ${_dockpose_libcamera_prefix
 	message(FATAL_ERROR "DOCKPOSE_LIBCAMERA=${DOCKPOSE_LIBCAMERA}: scripts/libcamera-build failed "
 		"(exit ${_dockpose_libcamera_rc}; its messages above)")
 endif()
-set(DOCKPOSE_LIBCAMERA_PREFIX ${_dockpose_libcamera_prefix} CACHE INTERNAL "")
+set(DOCKPOSE_LIBCAMERA_PREFIX ${_dockpose_libcamera_prefix} CACHE INTERNAL
+	"Prefix of the libcamera scripts/libcamera-build made")
 # The process environment, for every pkg_check_modules of this configure run (the cross
 # toolchain's PKG_CONFIG_LIBDIR stays: the rest still comes from the arm64 multiarch packages).
 set(ENV{PKG_CONFIG_PATH} "${DOCKPOSE_LIBCAMERA_PREFIX}/lib/pkgconfig")
