@@ -155,6 +155,17 @@ Status acquireManager(lc::CameraManager **out)
 	if (!s.manager) {
 		auto manager = std::make_unique<lc::CameraManager>();
 		const int ret = manager->start();
+		/*
+		 * -ENODEV: no media device at all. libcamera's sysfs enumerator (a
+		 * libcamera built without udev, as scripts/libcamera-build's) fails
+		 * the start then, where the udev one starts with no camera: the same
+		 * situation, so the same message.
+		 */
+		if (ret == -ENODEV) {
+			std::size_t none = 0;
+			return Status::error(selectCamera({}, "", 0, &none).message() +
+					     " (camera manager: " + errnoText(ret) + ")");
+		}
 		if (ret < 0)
 			return Status::error("libcamera: camera manager failed to start: " +
 					     errnoText(ret));
