@@ -118,12 +118,30 @@ if(NOT DOCKPOSE_DEB_LIBCAMERA_FOUND OR NOT DOCKPOSE_DEB_LIBGPIOD_FOUND)
 		"(run scripts/setup)")
 endif()
 set(libcamera_version ${DOCKPOSE_DEB_LIBCAMERA_VERSION})
-if(libcamera_version MATCHES "^0\\.0\\.")
-	# Before 0.1 the soname (and Debian's package name) carried the whole version.
-	string(REGEX MATCH "^[0-9]+\\.[0-9]+\\.[0-9]+" libcamera_abi "${libcamera_version}")
-else()
-	string(REGEX MATCH "^[0-9]+\\.[0-9]+" libcamera_abi "${libcamera_version}")
+# The package that holds libcamera is named after the soname of the library this build links
+# (Debian's policy: libcamera.so.0.0.3 is in libcamera0.0.3, Raspberry Pi OS's libcamera.so.0.7 in
+# libcamera0.7), read from the library file pkg-config names (readelf -d: its SONAME).
+set(libcamera_file "")
+foreach(lib IN LISTS DOCKPOSE_DEB_LIBCAMERA_LINK_LIBRARIES)
+	if(lib MATCHES "/libcamera\\.so$")
+		set(libcamera_file ${lib})
+	endif()
+endforeach()
+find_program(DOCKPOSE_READELF NAMES readelf ${CMAKE_READELF})
+if(NOT libcamera_file OR NOT DOCKPOSE_READELF)
+	message(FATAL_ERROR "packaging: no libcamera.so among '${DOCKPOSE_DEB_LIBCAMERA_LINK_LIBRARIES}', "
+		"or no readelf: cannot name libcamera's package")
 endif()
+execute_process(COMMAND ${DOCKPOSE_READELF} -d ${libcamera_file} OUTPUT_VARIABLE libcamera_dynamic
+	RESULT_VARIABLE readelf_rc)
+string(REGEX MATCH "\\(SONAME\\)[^[]*\\[libcamera\\.so\\.([0-9.]+)\\]" libcamera_soname_line
+	"${libcamera_dynamic}")
+if(NOT readelf_rc EQUAL 0 OR NOT CMAKE_MATCH_1)
+	message(FATAL_ERROR "packaging: no SONAME libcamera.so.N in ${libcamera_file} (readelf -d)")
+endif()
+set(libcamera_abi ${CMAKE_MATCH_1})
+message(STATUS "packaging: ${libcamera_file} has SONAME libcamera.so.${libcamera_abi}: "
+	"Depends libcamera${libcamera_abi}")
 string(REGEX MATCH "^[0-9]+\\.[0-9]+\\.[0-9]+" libcamera_min "${libcamera_version}")
 string(REGEX MATCH "^[0-9]+" libgpiod_major "${DOCKPOSE_DEB_LIBGPIOD_VERSION}")
 math(EXPR libgpiod_soname "${libgpiod_major} + 1")	# libgpiod 1.x: libgpiod.so.2, 2.x: libgpiod.so.3

@@ -34,17 +34,7 @@
 
 #include "hal/clock.h"
 #include "hal/frame_queue.h"
-
-#ifndef DOCKPOSE_LIBCAMERA_MAJOR
-#define DOCKPOSE_LIBCAMERA_MAJOR 0
-#endif
-#ifndef DOCKPOSE_LIBCAMERA_MINOR
-#define DOCKPOSE_LIBCAMERA_MINOR 0
-#endif
-
-/* libcamera 0.5 replaced AeEnable by ExposureTimeMode/AnalogueGainMode (AeEnable remains a wrapper). */
-#define DOCKPOSE_LIBCAMERA_HAS_EXPOSURE_MODES                                                      \
-	(DOCKPOSE_LIBCAMERA_MAJOR > 0 || DOCKPOSE_LIBCAMERA_MINOR >= 5)
+#include "hal/libcamera/libcamera_compat.h"
 
 namespace dockpose::hal {
 
@@ -165,6 +155,17 @@ Status acquireManager(lc::CameraManager **out)
 	if (!s.manager) {
 		auto manager = std::make_unique<lc::CameraManager>();
 		const int ret = manager->start();
+		/*
+		 * -ENODEV: no media device at all. libcamera's sysfs enumerator (a
+		 * libcamera built without udev, as scripts/libcamera-build's) fails
+		 * the start then, where the udev one starts with no camera: the same
+		 * situation, so the same message.
+		 */
+		if (ret == -ENODEV) {
+			std::size_t none = 0;
+			return Status::error(selectCamera({}, "", 0, &none).message() +
+					     " (camera manager: " + errnoText(ret) + ")");
+		}
 		if (ret < 0)
 			return Status::error("libcamera: camera manager failed to start: " +
 					     errnoText(ret));
@@ -397,10 +398,7 @@ private:
 	bool has_exposure_ = false;
 	bool has_gain_ = false;
 	bool has_frame_duration_ = false;
-#if DOCKPOSE_LIBCAMERA_HAS_EXPOSURE_MODES
-	bool has_exposure_mode_ = false;
-	bool has_gain_mode_ = false;
-#endif
+	compat::ManualModes manual_modes_; /* libcamera >= 0.5 */
 
 	/* Shared between threads. */
 	int event_fd_ = -1;
@@ -692,10 +690,7 @@ void LibcameraCamera::Impl::probeControls()
 	has_exposure_ = lists(lc::controls::ExposureTime);
 	has_gain_ = lists(lc::controls::AnalogueGain);
 	has_frame_duration_ = lists(lc::controls::FrameDurationLimits);
-#if DOCKPOSE_LIBCAMERA_HAS_EXPOSURE_MODES
-	has_exposure_mode_ = lists(lc::controls::ExposureTimeMode);
-	has_gain_mode_ = lists(lc::controls::AnalogueGainMode);
-#endif
+	manual_modes_ = compat::listedManualModes(controls);
 }
 
 Status LibcameraCamera::Impl::configure(const CameraConfig &config)
@@ -764,12 +759,7 @@ Status LibcameraCamera::Impl::start()
 	const auto [exposure_us, gain] = unpackControls(controls_packed_.load());
 	if (has_ae_enable_)
 		controls.set(lc::controls::AeEnable, false);
-#if DOCKPOSE_LIBCAMERA_HAS_EXPOSURE_MODES
-	if (has_exposure_mode_)
-		controls.set(lc::controls::ExposureTimeMode, lc::controls::ExposureTimeModeManual);
-	if (has_gain_mode_)
-		controls.set(lc::controls::AnalogueGainMode, lc::controls::AnalogueGainModeManual);
-#endif
+	compat::setManualModes(manual_modes_, &controls);
 	if (has_exposure_)
 		controls.set(lc::controls::ExposureTime, exposure_us);
 	if (has_gain_)

@@ -79,6 +79,13 @@ endif()
 
 dockpose_vm_backend_test(test_vm_libcamera vimc_libcamera dockpose_hal_libcamera PkgConfig::DOCKPOSE_VM_LIBCAMERA
 	${CMAKE_DL_LIBS})
+# The witness cam: the one of the libcamera built against when scripts/libcamera-build made it
+# (DOCKPOSE_LIBCAMERA; its arm64 build has none), else the guest's on PATH (Debian's).
+if(DOCKPOSE_LIBCAMERA_PREFIX AND EXISTS ${DOCKPOSE_LIBCAMERA_PREFIX}/bin/cam)
+	# (meson installs it without an RPATH to its own lib/: run through the shell with the path)
+	target_compile_definitions(test_vm_libcamera PRIVATE
+		DOCKPOSE_VM_CAM="LD_LIBRARY_PATH=${DOCKPOSE_LIBCAMERA_PREFIX}/lib ${DOCKPOSE_LIBCAMERA_PREFIX}/bin/cam")
+endif()
 # Its counting malloc / operator new would replace the sanitizers' own.
 if(DOCKPOSE_SANITIZE)
 	target_compile_definitions(test_vm_libcamera PRIVATE DOCKPOSE_VM_NO_ALLOC_HOOKS=1)
