@@ -246,6 +246,35 @@ TEST(Daemon, SimBoardAt60HzGivesAccuratePosesForNearlyEveryFrame)
 	EXPECT_GT(stats.latency.count(), 0u);
 }
 
+/* can.max_pose_latency_us: a pose whose exposure began longer ago than the bound when its
+ * report is made goes out as no pose, and is counted. At 1 ms (the least the key takes) the
+ * sim board's poses (exposure, delivery and pipeline: a few ms) are all late. */
+TEST(Daemon, APoseOlderThanTheLatencyBoundGoesOutAsNoPose)
+{
+	BoardConfig config = simConfig();
+	config.can.max_pose_latency_us = 1000;
+	Rig rig(config);
+	rig.start(1.0);
+	ASSERT_TRUE(rig.waitFor([&] { return rig.finished_.load(); }, 30s));
+	rig.stop();
+	EXPECT_EQ(rig.exit_status_, 0);
+
+	const DaemonStats &stats = rig.daemon_->stats();
+	ASSERT_GT(stats.processed, 10u) << "the camera delivered too few frames in 1 s";
+	EXPECT_GT(stats.poses_late, 0u);
+	int late_reports = 0;
+	for (const auto &r : rig.reports_) {
+		/* LatencyMs resolution 0.01 ms: a valid pose is never reported older than 1 ms. */
+		if (r.pose_valid) {
+			EXPECT_LE(r.status.latency_ms, 1.0 + 0.01)
+				<< "frame " << r.pose.frame_counter;
+		}
+		late_reports += !r.pose_valid && r.status.latency_ms > 1.0 + 0.01;
+	}
+	EXPECT_GT(late_reports, 0) << "no report older than the bound: the test proves nothing";
+	EXPECT_LE(stats.poses_valid + stats.poses_late, stats.processed);
+}
+
 /* can.fd: every report leaves as one DP_ReportFd (no classic report frame), heartbeats stay
  * classic, and the controller's decoder takes the same accurate poses from them. */
 TEST(Daemon, WithCanFdEveryReportIsOneFdFrame)
