@@ -18,6 +18,7 @@
 
 #include "firmware/protocol/dockpose_can.h"
 #include "tools/dockpose/view/can_input.h"
+#include "tools/dockpose/view/candump.h"
 #include "tools/dockpose/view/command.h"
 #include "tools/dockpose/view/page.h"
 #include "tools/dockpose/view/view_state.h"
@@ -37,16 +38,6 @@ void sendJson(httplib::Response &res, const json &j, int status = 200)
 	res.status = status;
 	res.set_header("Cache-Control", "no-store");
 	res.set_content(j.dump(-1, ' ', false, json::error_handler_t::replace), "application/json");
-}
-
-std::string frameHex(const can::RawFrame &f)
-{
-	char text[40];
-	int n = std::snprintf(text, sizeof(text), "%03X#", static_cast<unsigned int>(f.id));
-	for (std::size_t i = 0; i < f.len && i < 8; ++i)
-		n += std::snprintf(text + n, sizeof(text) - static_cast<std::size_t>(n), "%02X",
-				   f.data[i]);
-	return text;
 }
 
 } /* namespace */
@@ -211,7 +202,7 @@ int runView(const ViewArgs &args)
 			sendJson(res, { { "error", send_error } }, 503);
 			return;
 		}
-		json reply = { { "sent", frameHex(frame) } };
+		json reply = { { "sent", candumpFrameText(frame) } };
 		if (state.sensorAuthenticates())
 			reply["warning"] =
 				"the sensor authenticates commands (a CAN key): it refuses "

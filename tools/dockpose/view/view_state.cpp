@@ -12,6 +12,7 @@
 #include "algo/camera_model.h"
 #include "algo/io/model_json.h"
 #include "firmware/preview.h"
+#include "tools/dockpose/view/candump.h"
 
 namespace dockpose::tool {
 
@@ -22,17 +23,6 @@ using nlohmann::json;
 json vec3(const double (&v)[3])
 {
 	return json::array({ v[0], v[1], v[2] });
-}
-
-/* "305#0011223344556677": a frame as candump writes it, for a problem's detail. */
-std::string frameText(const can::RawFrame &frame)
-{
-	char text[40];
-	int n = std::snprintf(text, sizeof(text), "%03X#", static_cast<unsigned int>(frame.id));
-	for (std::size_t i = 0; i < frame.len && i < frame.data.size() && n < 36; ++i)
-		n += std::snprintf(text + n, sizeof(text) - static_cast<std::size_t>(n), "%02X",
-				   frame.data[i]);
-	return text;
 }
 
 json faultNames(std::uint8_t bits)
@@ -79,7 +69,7 @@ void ViewState::feed(const can::RawFrame &frame, std::int64_t arrival_us)
 	std::unique_lock<std::mutex> lock(mutex_);
 	const can::Decoder::Event event = decoder_.feed(frame, arrival_us);
 	if (event == can::Decoder::Event::Rejected)
-		noteProblem(can::frameErrorName(decoder_.lastError()), frameText(frame),
+		noteProblem(can::frameErrorName(decoder_.lastError()), candumpFrameText(frame),
 			    arrival_us);
 	afterFeed(event, arrival_us);
 	lock.unlock();
