@@ -339,17 +339,11 @@ std::string reportLines(can::Encoder *encoder, int first, int count)
 		const int n = encoder->encodeReport(statusWith(0), &pose, out);
 		const std::int64_t t = kT0Us + k * kPeriodUs;
 		for (int i = 0; i < n; ++i) {
-			char line[80];
-			int m = std::snprintf(line, sizeof(line), "(%lld.%06lld) can0 %03X#",
-					      static_cast<long long>(t / 1000000),
-					      static_cast<long long>(t % 1000000),
-					      static_cast<unsigned int>(out[i].id));
-			for (int b = 0; b < 8; ++b)
-				m += std::snprintf(line + m,
-						   sizeof(line) - static_cast<std::size_t>(m),
-						   "%02X",
-						   out[i].data[static_cast<std::size_t>(b)]);
-			text += std::string(line) + "\n";
+			char stamp[40];
+			std::snprintf(stamp, sizeof(stamp), "(%lld.%06lld) can0 ",
+				      static_cast<long long>(t / 1000000),
+				      static_cast<long long>(t % 1000000));
+			text += stamp + tool::candumpFrameText(out[i]) + "\n";
 		}
 	}
 	return text;
