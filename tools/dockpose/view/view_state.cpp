@@ -140,6 +140,10 @@ void ViewState::countProblems(std::int64_t now_us)
 		{ &can::Decoder::Counters::incomplete_poses,
 		  "incomplete pose (a pose frame missing)" },
 		{ &can::Decoder::Counters::stale_poses, "pose too old at arrival" },
+		/* With a key: a group whose MAC never came is dropped without a rejected frame
+		 * (keyless traffic to a keyed view, or its DP_Auth lost). */
+		{ &can::Decoder::Counters::unauthenticated,
+		  "not authenticated (a group without its MAC)" },
 	};
 	for (const auto &[member, name] : counted) {
 		if (c.*member > seen_counters_.*member)
@@ -299,7 +303,13 @@ json ViewState::stateJson(std::int64_t now_us) const
 		{ "stale_frames", c.stale_frames },
 		{ "stale_poses", c.stale_poses },
 		{ "undated_poses", c.undated_poses },
+		{ "auth_failures", c.auth_failures },
+		{ "replays", c.replays },
+		{ "unsynced", c.unsynced },
+		{ "unauthenticated", c.unauthenticated },
 	};
+	/* With a key: only what the sensor's MACs vouch for is shown. */
+	j["verifying"] = decoder_.authenticating();
 
 	json problems = json::array();
 	for (const auto &[name, p] : problems_)
@@ -447,6 +457,24 @@ bool ViewState::sensorAuthenticates() const
 {
 	const std::lock_guard<std::mutex> lock(mutex_);
 	return have_heartbeat_ && heartbeat_.authenticated;
+}
+
+Status ViewState::setKey(const std::array<std::uint8_t, can::kKeyBytes> &key)
+{
+	auto mac = std::make_unique<can::OpensslCmac>();
+	if (!mac->setKey(key))
+		return Status::error("OpenSSL has no AES-128 CMAC: the sensor's frames cannot be "
+				     "verified");
+	const std::lock_guard<std::mutex> lock(mutex_);
+	decoder_.setAuthenticator(mac.get());
+	mac_ = std::move(mac);
+	return Status::ok();
+}
+
+std::uint64_t ViewState::sensorFreshness() const
+{
+	const std::lock_guard<std::mutex> lock(mutex_);
+	return decoder_.authenticating() ? decoder_.freshness() : 0;
 }
 
 std::uint64_t ViewState::waitForUpdate(std::uint64_t seen, std::chrono::milliseconds timeout) const
