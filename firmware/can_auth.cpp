@@ -66,17 +66,6 @@ std::string trimmed(const std::string &s)
 	return s.substr(a, b - a);
 }
 
-int hexValue(char c)
-{
-	if (c >= '0' && c <= '9')
-		return c - '0';
-	if (c >= 'a' && c <= 'f')
-		return c - 'a' + 10;
-	if (c >= 'A' && c <= 'F')
-		return c - 'A' + 10;
-	return -1;
-}
-
 } /* namespace */
 
 hal::Status loadCanKey(const std::string &path, std::array<std::uint8_t, can::kKeyBytes> *key)
@@ -105,13 +94,14 @@ hal::Status loadCanKey(const std::string &path, std::array<std::uint8_t, can::kK
 			"CAN key " + path + ": " + std::to_string(digits.size()) +
 			" characters, 32 hexadecimal digits (a 128-bit key) expected");
 	for (std::size_t i = 0; i < can::kKeyBytes; ++i) {
-		const int hi = hexValue(digits[2 * i]);
-		const int lo = hexValue(digits[2 * i + 1]);
-		if (hi < 0 || lo < 0)
+		/* Two digits a byte; from_chars stops at the first that is not hex (an unsigned
+		 * value takes no sign, base 16 no "0x"). */
+		const char *first = digits.data() + 2 * i;
+		const auto [end, ec] = std::from_chars(first, first + 2, (*key)[i], 16);
+		if (ec != std::errc() || end != first + 2)
 			return hal::Status::error("CAN key " + path +
 						  ": not hexadecimal (character " +
-						  std::to_string(2 * i + (hi < 0 ? 1 : 2)) + ")");
-		(*key)[i] = static_cast<std::uint8_t>((hi << 4) | lo);
+						  std::to_string(end - digits.data() + 1) + ")");
 	}
 	return hal::Status::ok();
 }

@@ -5,9 +5,12 @@
  * page shows (pose, σ, state, fault names, rate), stale after max(3 periods,
  * 300 ms), damaged frames and lines named as problems, a log followed as it
  * grows (a half-written line waits for its end; a truncated file is read
- * again), the 30 s history, and the page's command as the DP_Command a sensor
- * decodes. The page in a browser: view_browser_e2e.py.
+ * again), the 30 s history, the page's command as the DP_Command a sensor
+ * decodes, and with --key the command signed so that the sensor's own
+ * verifier takes it (and refuses a wrong key's and a replayed one). The page
+ * in a browser: view_browser_e2e.py.
  */
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -20,6 +23,7 @@
 #include <gtest/gtest.h>
 
 #include "firmware/protocol/dockpose_can.h"
+#include "firmware/protocol/dockpose_can_cmac.h"
 #include "tools/dockpose/view/can_input.h"
 #include "tools/dockpose/view/candump.h"
 #include "tools/dockpose/view/command.h"
@@ -339,17 +343,11 @@ std::string reportLines(can::Encoder *encoder, int first, int count)
 		const int n = encoder->encodeReport(statusWith(0), &pose, out);
 		const std::int64_t t = kT0Us + k * kPeriodUs;
 		for (int i = 0; i < n; ++i) {
-			char line[80];
-			int m = std::snprintf(line, sizeof(line), "(%lld.%06lld) can0 %03X#",
-					      static_cast<long long>(t / 1000000),
-					      static_cast<long long>(t % 1000000),
-					      static_cast<unsigned int>(out[i].id));
-			for (int b = 0; b < 8; ++b)
-				m += std::snprintf(line + m,
-						   sizeof(line) - static_cast<std::size_t>(m),
-						   "%02X",
-						   out[i].data[static_cast<std::size_t>(b)]);
-			text += std::string(line) + "\n";
+			char stamp[40];
+			std::snprintf(stamp, sizeof(stamp), "(%lld.%06lld) can0 ",
+				      static_cast<long long>(t / 1000000),
+				      static_cast<long long>(t % 1000000));
+			text += stamp + tool::candumpFrameText(out[i]) + "\n";
 		}
 	}
 	return text;
@@ -423,6 +421,173 @@ TEST_F(Follower, AMissingLogIsAProblemUntilItAppears)
 	const json after = state.stateJson(kT0Us);
 	EXPECT_EQ(after["frame"], poseAt(5).frame_counter);
 	EXPECT_TRUE(after["problems"][0]["resolved"].get<bool>()) << after["problems"].dump();
+}
+
+/* --key: the view's sending path (useCanKey, ViewState, CommandSender, as runView wires them)
+ * against the sensor's side as dockposed sets it up (Daemon::startAuthentication): one CMAC for
+ * its encoder and its command decoder, a run's freshness values from run << 32, and commands
+ * taken within the last 256 of its values. */
+class SignedCommand : public ::testing::Test
+{
+protected:
+	static constexpr const char *kKeyHex = "2b7e151628aed2a6abf7158809cf4f3c";
+	static constexpr const char *kOtherKeyHex = "000102030405060708090a0b0c0d0e0f";
+	static constexpr std::uint64_t kWindow = 256; /* daemon.cpp's kCommandFreshnessWindow */
+
+	void SetUp() override
+	{
+		char dir_template[] = "/tmp/view-key.XXXXXX";
+		ASSERT_NE(mkdtemp(dir_template), nullptr);
+		dir_ = dir_template;
+		std::array<std::uint8_t, can::kKeyBytes> key{};
+		for (std::size_t i = 0; i < key.size(); ++i)
+			key[i] = static_cast<std::uint8_t>(
+				std::stoi(std::string(kKeyHex + 2 * i, 2), nullptr, 16));
+		ASSERT_TRUE(sensor_mac_.setKey(key));
+		sensor_.setAuthenticator(&sensor_mac_, std::uint64_t{ 7 } << 32);
+		daemon_side_.setAuthenticator(&sensor_mac_);
+		daemon_side_.setCommandFreshness(&sensor_, kWindow);
+	}
+	void TearDown() override { (void)std::system(("rm -rf '" + dir_ + "'").c_str()); }
+
+	std::string keyFile(const std::string &name, const char *hex, mode_t mode)
+	{
+		const std::string path = dir_ + "/" + name;
+		std::ofstream(path) << hex << "\n";
+		::chmod(path.c_str(), mode);
+		return path;
+	}
+
+	/* The sensor's next heartbeat (with DP_Freshness and DP_Auth) or report into *state. */
+	void sensorHeartbeat(ViewState *state)
+	{
+		can::RawFrame out[can::kMaxHeartbeatFrames];
+		const int n = sensor_.encodeHeartbeat(can::HeartbeatData{}, out);
+		for (int i = 0; i < n; ++i)
+			state->feed(out[i], t_us_);
+		t_us_ += kPeriodUs;
+	}
+	void sensorReport(ViewState *state)
+	{
+		can::PoseData pose = poseAt(0);
+		can::RawFrame out[can::kMaxReportFrames];
+		const int n = sensor_.encodeReport(statusWith(0), &pose, out);
+		for (int i = 0; i < n; ++i)
+			state->feed(out[i], t_us_);
+		t_us_ += kPeriodUs;
+	}
+
+	/* The frames into a sensor's command decoder (by default the one that has seen the
+	 * test's every command); its last event. */
+	can::Decoder::Event toSensor(const can::RawFrame *frames, int count,
+				     can::Decoder *decoder = nullptr)
+	{
+		can::Decoder &d = decoder ? *decoder : daemon_side_;
+		can::Decoder::Event e = can::Decoder::Event::None;
+		for (int i = 0; i < count; ++i)
+			e = d.feed(frames[i]);
+		return e;
+	}
+
+	std::string dir_;
+	std::int64_t t_us_ = kT0Us;
+	can::OpensslCmac sensor_mac_;
+	can::Encoder sensor_;
+	can::Decoder daemon_side_;
+};
+
+TEST_F(SignedCommand, TheSensorTakesTheViewsSignedCommandOnceAndNoneOfAnotherKey)
+{
+	ViewState view;
+	tool::CommandSender sender(can::kDefaultBaseId);
+	ASSERT_TRUE(tool::useCanKey(keyFile("can.key", kKeyHex, 0600), &view, &sender).isOk());
+	EXPECT_TRUE(sender.signing());
+	EXPECT_TRUE(view.stateJson(kT0Us)["verifying"].get<bool>());
+
+	can::CommandData cmd;
+	cmd.exposure_us = 1500;
+	can::RawFrame first[can::kMaxCommandFrames];
+	int count = -1;
+	/* No sensor value verified yet: nothing to answer, nothing signed. */
+	EXPECT_NE(
+		sender.encode(cmd, view.sensorFreshness(), first, &count).find("no authenticated"),
+		std::string::npos);
+	EXPECT_EQ(count, 0);
+
+	/* A heartbeat: the view verifies it and answers the sensor's value. */
+	sensorHeartbeat(&view);
+	ASSERT_EQ(view.sensorFreshness(), sensor_.freshness());
+	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), first, &count), "");
+	ASSERT_EQ(count, 2);
+	EXPECT_EQ(first[0].id, can::kDefaultBaseId + can::kCommand);
+	EXPECT_EQ(first[1].id, can::kDefaultBaseId + can::kCommandAuth);
+	ASSERT_EQ(toSensor(first, count), can::Decoder::Event::Command)
+		<< can::frameErrorName(daemon_side_.lastError());
+	EXPECT_EQ(daemon_side_.command().exposure_us, 1500);
+
+	/* The same value again: the sensor would refuse it, so the view does not send it. */
+	can::RawFrame again[can::kMaxCommandFrames];
+	EXPECT_NE(sender.encode(cmd, view.sensorFreshness(), again, &count).find("not moved"),
+		  std::string::npos);
+	EXPECT_EQ(count, 0);
+
+	/* The next report moves it on: a second command is taken. */
+	sensorReport(&view);
+	cmd.exposure_us = 1600;
+	can::RawFrame second[can::kMaxCommandFrames];
+	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), second, &count), "");
+	ASSERT_EQ(toSensor(second, count), can::Decoder::Event::Command);
+	EXPECT_EQ(daemon_side_.command().exposure_us, 1600);
+
+	/* The first command recorded and replayed: its alive counters pass, its freshness does
+	 * not (older than the last command's). */
+	EXPECT_EQ(toSensor(first, 2), can::Decoder::Event::Rejected);
+	EXPECT_EQ(daemon_side_.lastError(), can::FrameError::Replayed);
+
+	/* A view with another key: the sensor's frames fail their MACs there (named on the page,
+	 * nothing shown, no value to answer), and a command it signs, even answering a value the
+	 * sensor did send, is refused. (A sensor decoder of its own: another sender's alive
+	 * counters start again at 0, which the first decoder would take for repeated frames.) */
+	ViewState other_view;
+	tool::CommandSender other(can::kDefaultBaseId);
+	ASSERT_TRUE(tool::useCanKey(keyFile("other.key", kOtherKeyHex, 0400), &other_view, &other)
+			    .isOk());
+	sensorHeartbeat(&other_view);
+	EXPECT_EQ(other_view.sensorFreshness(), 0u);
+	const json shown = other_view.stateJson(t_us_);
+	EXPECT_GT(shown["counters"]["auth_failures"].get<std::uint64_t>(), 0u);
+	EXPECT_TRUE(hasProblem(shown, can::frameErrorName(can::FrameError::BadMac)))
+		<< shown["problems"].dump();
+	EXPECT_TRUE(shown["heartbeat"].is_null());
+	EXPECT_NE(other.encode(cmd, other_view.sensorFreshness(), again, &count)
+			  .find("no authenticated"),
+		  std::string::npos);
+
+	sensorReport(&view);
+	can::Decoder fresh_sensor_side(can::kDefaultBaseId);
+	fresh_sensor_side.setAuthenticator(&sensor_mac_);
+	fresh_sensor_side.setCommandFreshness(&sensor_, kWindow);
+	can::RawFrame forged[can::kMaxCommandFrames];
+	ASSERT_EQ(other.encode(cmd, view.sensorFreshness(), forged, &count), "");
+	EXPECT_EQ(toSensor(forged, count, &fresh_sensor_side), can::Decoder::Event::Rejected);
+	EXPECT_EQ(fresh_sensor_side.lastError(), can::FrameError::BadMac);
+	/* The right view's command answering the same value: taken by both. */
+	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), second, &count), "");
+	EXPECT_EQ(toSensor(second, count), can::Decoder::Event::Command);
+	EXPECT_EQ(toSensor(second, count, &fresh_sensor_side), can::Decoder::Event::Command);
+}
+
+TEST_F(SignedCommand, AKeyFileTheSensorWouldRefuseIsRefusedByName)
+{
+	ViewState view;
+	tool::CommandSender sender(can::kDefaultBaseId);
+	const std::string open = keyFile("open.key", kKeyHex, 0644);
+	const Status s = tool::useCanKey(open, &view, &sender);
+	ASSERT_FALSE(s.isOk());
+	EXPECT_NE(s.message().find(open), std::string::npos) << s.message();
+	EXPECT_NE(s.message().find("lets group or others at it"), std::string::npos) << s.message();
+	EXPECT_FALSE(sender.signing());
+	EXPECT_FALSE(view.stateJson(kT0Us)["verifying"].get<bool>());
 }
 
 } /* namespace */

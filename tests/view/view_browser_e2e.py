@@ -27,6 +27,7 @@ import base64
 import fcntl
 import json
 import os
+import runpy
 import shutil
 import signal
 import struct
@@ -211,15 +212,6 @@ def last_valid_pose(log_path, dbc_path):
 	return last
 
 
-def crc8_j1850(data):
-	crc = 0xFF
-	for byte in data:
-		crc ^= byte
-		for _ in range(8):
-			crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-	return crc ^ 0xFF
-
-
 def wait_for(what, predicate, timeout, step=0.05):
 	deadline = time.time() + timeout
 	while time.time() < deadline:
@@ -373,7 +365,9 @@ def run_test(args):
 					status_line = line.split()
 		data = bytearray.fromhex(status_line[2].split("#")[1])
 		data[6] = (data[6] & 0xF0) | ((data[6] + 1) & 0x0F)  # the next alive counter
-		data[7] = crc8_j1850(bytes([0x05, 0x03]) + bytes(data[:7]))
+		# The CRC from candecode (the Python tools' one copy of CRC-8 SAE J1850).
+		frame_crc = runpy.run_path(os.path.join(args.source, "scripts/candecode"))["frame_crc"]
+		data[7] = frame_crc(0x305, data)
 		data[7] ^= 0x5A  # and a CRC that does not match
 		now = time.time()
 		with open(log, "a") as f:

@@ -31,6 +31,7 @@ import json
 import math
 import pathlib
 import re
+import runpy
 import subprocess
 import sys
 
@@ -38,6 +39,9 @@ REPO = pathlib.Path(__file__).resolve().parent.parent.parent
 DBC = REPO / "firmware" / "protocol" / "dockpose.dbc"
 CANDECODE = REPO / "scripts" / "candecode"
 CANMATRIX_DECODE = REPO / "tests" / "firmware" / "canmatrix_decode.py"
+# The CRC of a frame (CRC-8 SAE J1850 over its id and bytes 0..6): candecode's, the Python tools'
+# one copy.
+frame_crc = runpy.run_path(str(CANDECODE))["frame_crc"]
 BOARD = REPO / "board" / "vm" / "board.json"
 PYTHON = "/usr/bin/python3"
 
@@ -93,22 +97,12 @@ class Checks:
 # --------------------------------------------------------------------------- frames
 
 
-def crc8_j1850(data):
-	"""CRC-8 SAE J1850 (poly 0x1d, init 0xff, xorout 0xff), as docs/can-protocol.md says."""
-	crc = 0xFF
-	for byte in data:
-		crc ^= byte
-		for _ in range(8):
-			crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-	return crc ^ 0xFF
-
-
 def command_frame(enable, mode, strobe, alive, bad_crc):
 	"""DP_Command bytes, packed from docs/can-protocol.md and checked against the DBC."""
 	data = bytearray(8)
 	data[0] = (enable & 1) | ((mode & 1) << 1) | ((strobe & 3) << 2)
 	data[6] = alive & 0x0F  # Sequence 0 in commands
-	data[7] = crc8_j1850(bytes([COMMAND_ID & 0xFF, (COMMAND_ID >> 8) & 0x07]) + bytes(data[:7]))
+	data[7] = frame_crc(COMMAND_ID, data)
 	if bad_crc:
 		data[7] ^= 0xFF
 	# The same values through the DBC: a layout mistake here would send a command other than

@@ -33,7 +33,7 @@
  *       built without it says so and exits 2.
  *
  *   dockpose view [--can IFACE | --can-log FILE] [--preview NAME] [--bind ADDR] [--port N]
- *                 [--camera C.json] [--base-id ID] [--allow-commands]
+ *                 [--camera C.json] [--base-id ID] [--allow-commands [--key FILE]]
  *       The operator's live page (view/view.h, docs/operator-view.md). Built only
  *       where cpp-httplib is found; a dockpose built without it says so and exits 2.
  */
@@ -405,6 +405,12 @@ CLI::App *addViewCommand(CLI::App *app, dockpose::tool::ViewArgs *args)
 		->default_val(args->base_id);
 	cmd->add_flag("--allow-commands", args->allow_commands,
 		      "Add controls that send DP_Command (with --can only)");
+	/* Its needs (--can, --allow-commands) are checked by runView(), which names them. */
+	cmd->add_option("--key", args->key_file,
+			"The sensor's CAN key file (can.key_file: 32 hex digits, mode 0600/0400): "
+			"commands go out signed (DP_CommandAuth), and the sensor's frames are "
+			"verified with it before they are shown (with --can and --allow-commands)")
+		->type_name("FILE");
 	return cmd;
 }
 

@@ -10,6 +10,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -27,6 +28,18 @@ constexpr std::int64_t kRetryUs = 1000000;
 /* The preview ring is read this often, and reopened when it has not moved for this long. */
 constexpr std::chrono::milliseconds kPreviewPoll{ 50 };
 constexpr std::int64_t kPreviewStillUs = 2000000;
+
+/* A frame read from the socket as the protocol's classic or FD frame (its data cut to what the
+ * frame holds). */
+template<typename Frame>
+Frame fromSocket(const canfd_frame &raw)
+{
+	Frame f;
+	f.id = raw.can_id & CAN_SFF_MASK;
+	f.len = static_cast<std::uint8_t>(std::min<std::size_t>(raw.len, f.data.size()));
+	std::memcpy(f.data.data(), raw.data, f.len);
+	return f;
+}
 } /* namespace */
 
 std::int64_t realtimeUs()
@@ -258,21 +271,13 @@ int SocketCanInput::poll(int timeout_ms)
 		const std::int64_t now_us = realtimeUs();
 		if ((raw.can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG)) != 0)
 			continue; /* extended, remote or error frames: never ours */
-		if (n == static_cast<ssize_t>(CAN_MTU)) {
-			can::RawFrame f;
-			f.id = raw.can_id & CAN_SFF_MASK;
-			f.len = static_cast<std::uint8_t>(raw.len > 8 ? 8 : raw.len);
-			std::memcpy(f.data.data(), raw.data, f.len);
-			state_->feed(f, now_us);
-			++fed;
-		} else if (n == static_cast<ssize_t>(CANFD_MTU)) {
-			can::FdFrame f;
-			f.id = raw.can_id & CAN_SFF_MASK;
-			f.len = static_cast<std::uint8_t>(raw.len > 64 ? 64 : raw.len);
-			std::memcpy(f.data.data(), raw.data, f.len);
-			state_->feedFd(f, now_us);
-			++fed;
-		}
+		if (n == static_cast<ssize_t>(CAN_MTU))
+			state_->feed(fromSocket<can::RawFrame>(raw), now_us);
+		else if (n == static_cast<ssize_t>(CANFD_MTU))
+			state_->feedFd(fromSocket<can::FdFrame>(raw), now_us);
+		else
+			continue;
+		++fed;
 	}
 	return fed;
 }

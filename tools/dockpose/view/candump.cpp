@@ -1,22 +1,14 @@
 /* SPDX-License-Identifier: MIT */
 #include "tools/dockpose/view/candump.h"
 
+#include <charconv>
 #include <cstddef>
+#include <cstdio>
+#include <system_error>
 
 namespace dockpose::tool {
 
 namespace {
-
-int hexValue(char c)
-{
-	if (c >= '0' && c <= '9')
-		return c - '0';
-	if (c >= 'a' && c <= 'f')
-		return c - 'a' + 10;
-	if (c >= 'A' && c <= 'F')
-		return c - 'A' + 10;
-	return -1;
-}
 
 /* A cursor over the line: each step either moves on, or says why it cannot. */
 class Cursor
@@ -29,6 +21,15 @@ public:
 
 	bool atEnd() const { return pos_ >= text_.size(); }
 	char peek() const { return text_[pos_]; }
+	/* The value of the hex digit here, -1 when there is none. */
+	int peekHex() const
+	{
+		unsigned int value = 0;
+		const char *at = text_.data() + pos_;
+		if (atEnd() || std::from_chars(at, at + 1, value, 16).ec != std::errc())
+			return -1;
+		return static_cast<int>(value);
+	}
 	void next() { ++pos_; }
 	std::size_t pos() const { return pos_; }
 
@@ -105,8 +106,8 @@ CandumpParse parseCandumpLine(std::string_view line, CandumpLine *out)
 
 	std::uint32_t id = 0;
 	int id_digits = 0;
-	while (!c.atEnd() && hexValue(c.peek()) >= 0 && id_digits < 8) {
-		id = (id << 4) | static_cast<std::uint32_t>(hexValue(c.peek()));
+	while (c.peekHex() >= 0 && id_digits < 8) {
+		id = (id << 4) | static_cast<std::uint32_t>(c.peekHex());
 		++id_digits;
 		c.next();
 	}
@@ -124,7 +125,7 @@ CandumpParse parseCandumpLine(std::string_view line, CandumpLine *out)
 		c.next();
 		if (c.atEnd())
 			return fail(out, c, "the line ends before the FD flags");
-		if (hexValue(c.peek()) < 0)
+		if (c.peekHex() < 0)
 			return fail(out, c, "the FD flags are not a hex digit");
 		c.next();
 	} else if (!c.atEnd() && (c.peek() == 'R' || c.peek() == 'r')) {
@@ -135,13 +136,13 @@ CandumpParse parseCandumpLine(std::string_view line, CandumpLine *out)
 	std::size_t count = 0;
 	const std::size_t max_bytes = fd ? 64 : 8;
 	while (!c.atEnd()) {
-		const int hi = hexValue(c.peek());
+		const int hi = c.peekHex();
 		if (hi < 0)
 			return fail(out, c, "a data byte is not hex");
 		c.next();
 		if (c.atEnd())
 			return fail(out, c, "an odd number of hex digits: the last byte is cut");
-		const int lo = hexValue(c.peek());
+		const int lo = c.peekHex();
 		if (lo < 0)
 			return fail(out, c, "a data byte is not hex");
 		c.next();
@@ -168,6 +169,16 @@ CandumpParse parseCandumpLine(std::string_view line, CandumpLine *out)
 	for (std::size_t i = 0; i < count; ++i)
 		out->frame.data[i] = bytes[i];
 	return CandumpParse::Classic;
+}
+
+std::string candumpFrameText(const can::RawFrame &frame)
+{
+	char text[40];
+	int n = std::snprintf(text, sizeof(text), "%03X#", static_cast<unsigned int>(frame.id));
+	for (std::size_t i = 0; i < frame.len && i < frame.data.size(); ++i)
+		n += std::snprintf(text + n, sizeof(text) - static_cast<std::size_t>(n), "%02X",
+				   frame.data[i]);
+	return text;
 }
 
 const char *candumpParseName(CandumpParse result)

@@ -10,13 +10,16 @@
  * and a classic or FD frame. A line that ends where more was due (the writer
  * was cut off, or the reader caught a line half written) is Truncated; a
  * character that has no place there is Malformed. Remote frames ("ID#R") and
- * extended (8-digit) identifiers are Ignored: never ours.
+ * extended (8-digit) identifiers are Ignored: never ours. candumpFrameText()
+ * writes a classic frame the way such a line does ("305#0011223344556677").
  *
- * Allocates: never (the error text is a static string). Any thread.
+ * Allocates: parseCandumpLine() never (the error text is a static string);
+ * candumpFrameText() its string. Any thread.
  */
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <string_view>
 
 #include "firmware/protocol/dockpose_can.h"
@@ -39,6 +42,10 @@ struct CandumpLine {
 };
 
 CandumpParse parseCandumpLine(std::string_view line, CandumpLine *out);
+
+/* "305#0011223344556677": the frame as a candump line has it (3 hex digits of identifier, '#',
+ * two hex digits a data byte, at most 8). */
+std::string candumpFrameText(const can::RawFrame &frame);
 
 /* "malformed log line", "truncated log line", ... (the names the page shows). */
 const char *candumpParseName(CandumpParse result);

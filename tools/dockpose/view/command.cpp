@@ -3,6 +3,9 @@
 
 #include <cstdint>
 
+#include "firmware/can_auth.h"
+#include "tools/dockpose/view/view_state.h"
+
 namespace dockpose::tool {
 
 std::string commandFromJson(const nlohmann::json &body, can::CommandData *cmd)
@@ -55,6 +58,66 @@ std::string commandFromJson(const nlohmann::json &body, can::CommandData *cmd)
 		cmd->gain = g;
 	}
 	return "";
+}
+
+CommandSender::CommandSender(std::uint32_t base_id)
+	: encoder_(base_id)
+{
+}
+
+Status CommandSender::setKey(const std::array<std::uint8_t, can::kKeyBytes> &key)
+{
+	const std::lock_guard<std::mutex> lock(mutex_);
+	if (!cmac_.setKey(key)) {
+		encoder_.setAuthenticator(nullptr);
+		return Status::error("OpenSSL has no AES-128 CMAC: commands cannot be signed");
+	}
+	/* Commands never advance the encoder's own freshness value (only a sensor's DP_Auth
+	 * does): what a command carries is the sensor's value it answers. */
+	encoder_.setAuthenticator(&cmac_);
+	return Status::ok();
+}
+
+bool CommandSender::signing() const
+{
+	const std::lock_guard<std::mutex> lock(mutex_);
+	return encoder_.authenticating();
+}
+
+std::string CommandSender::encode(const can::CommandData &cmd, std::uint64_t sensor_freshness,
+				  can::RawFrame (&out)[can::kMaxCommandFrames], int *count)
+{
+	const std::lock_guard<std::mutex> lock(mutex_);
+	*count = 0;
+	if (encoder_.authenticating()) {
+		if (sensor_freshness == 0)
+			return "no authenticated sensor frame verified yet (the sensor's key is "
+			       "another, the sensor is keyless, or no heartbeat came yet)";
+		if (sensor_freshness <= last_freshness_)
+			return "the sensor's freshness value has not moved since the last command "
+			       "(it takes one command per DP_Auth)";
+	}
+	*count = encoder_.encodeCommand(cmd, sensor_freshness, out);
+	if (encoder_.authenticating()) {
+		if (encoder_.macFailed()) {
+			*count = 0;
+			return "the command's MAC could not be computed (OpenSSL)";
+		}
+		last_freshness_ = sensor_freshness;
+	}
+	return "";
+}
+
+Status useCanKey(const std::string &path, ViewState *state, CommandSender *sender)
+{
+	std::array<std::uint8_t, can::kKeyBytes> key{};
+	Status result = firmware::loadCanKey(path, &key);
+	if (result)
+		result = state->setKey(key);
+	if (result)
+		result = sender->setKey(key);
+	key.fill(0);
+	return result;
 }
 
 } /* namespace dockpose::tool */

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <mutex>
 #include <string>
 #include <thread>
 
@@ -18,6 +19,7 @@
 
 #include "firmware/protocol/dockpose_can.h"
 #include "tools/dockpose/view/can_input.h"
+#include "tools/dockpose/view/candump.h"
 #include "tools/dockpose/view/command.h"
 #include "tools/dockpose/view/page.h"
 #include "tools/dockpose/view/view_state.h"
@@ -31,6 +33,8 @@ using nlohmann::json;
 /* An event stream sends at least this often (age and stale move without reports). */
 constexpr std::chrono::milliseconds kEventsEvery{ 100 };
 constexpr double kDefaultEventsHz = 30.0;
+/* A signed command waits this long at most for a sensor freshness value it may answer. */
+constexpr std::chrono::milliseconds kFreshnessWait{ 300 };
 
 void sendJson(httplib::Response &res, const json &j, int status = 200)
 {
@@ -39,22 +43,19 @@ void sendJson(httplib::Response &res, const json &j, int status = 200)
 	res.set_content(j.dump(-1, ' ', false, json::error_handler_t::replace), "application/json");
 }
 
-std::string frameHex(const can::RawFrame &f)
-{
-	char text[40];
-	int n = std::snprintf(text, sizeof(text), "%03X#", static_cast<unsigned int>(f.id));
-	for (std::size_t i = 0; i < f.len && i < 8; ++i)
-		n += std::snprintf(text + n, sizeof(text) - static_cast<std::size_t>(n), "%02X",
-				   f.data[i]);
-	return text;
-}
-
 } /* namespace */
 
 int runView(const ViewArgs &args)
 {
 	if (!args.can_interface.empty() && !args.can_log.empty()) {
 		std::fprintf(stderr, "dockpose view: --can and --can-log exclude each other\n");
+		return 2;
+	}
+	if (!args.key_file.empty() && (!args.allow_commands || args.can_interface.empty())) {
+		std::fprintf(stderr,
+			     "dockpose view: --key %s signs commands: it needs --can IFACE "
+			     "and --allow-commands\n",
+			     args.key_file.c_str());
 		return 2;
 	}
 	if (args.allow_commands && args.can_interface.empty()) {
@@ -82,6 +83,14 @@ int runView(const ViewArgs &args)
 			return 2;
 		}
 	}
+	CommandSender sender(static_cast<std::uint32_t>(base_id));
+	if (!args.key_file.empty()) {
+		const Status keyed = useCanKey(args.key_file, &state, &sender);
+		if (!keyed.isOk()) {
+			std::fprintf(stderr, "dockpose view: --key: %s\n", keyed.message().c_str());
+			return 2;
+		}
+	}
 	state.setSource(!args.can_log.empty()	      ? "can-log " + args.can_log
 			: !args.can_interface.empty() ? "can " + args.can_interface
 						      : "no CAN source (--can or --can-log)");
@@ -105,13 +114,12 @@ int runView(const ViewArgs &args)
 		return new httplib::ThreadPool(kHttpThreads);
 	};
 	std::atomic<bool> stopping{ false };
-	/* The command's encoder (its alive counter goes on from command to command). */
-	std::mutex encoder_mutex;
-	can::Encoder encoder(static_cast<std::uint32_t>(base_id));
+	std::mutex command_mutex; /* POST /api/command: one command's frames at a time */
 
 	const json config = {
 		{ "source", !args.can_log.empty() ? "can-log" : "can" },
 		{ "allow_commands", args.allow_commands },
+		{ "signed_commands", sender.signing() },
 		{ "preview", args.preview },
 		{ "camera", !args.camera.empty() },
 		{ "base_id", base_id },
@@ -201,21 +209,38 @@ int runView(const ViewArgs &args)
 			sendJson(res, { { "error", error } }, 400);
 			return;
 		}
-		can::RawFrame frame;
-		{
-			const std::lock_guard<std::mutex> lock(encoder_mutex);
-			frame = encoder.encodeCommand(cmd);
+		/* One command at a time, encoded and sent whole: a signed one's two frames must
+		 * not interleave with another's, nor go out after a newer one. Signed: the newest
+		 * sensor freshness value verified; one the last command answered already is
+		 * waited out (the next DP_Auth comes within 100 ms). */
+		const std::lock_guard<std::mutex> lock(command_mutex);
+		can::RawFrame frames[can::kMaxCommandFrames];
+		int count = 0;
+		const auto deadline = std::chrono::steady_clock::now() + kFreshnessWait;
+		std::uint64_t seen = 0;
+		std::string refused = sender.encode(cmd, state.sensorFreshness(), frames, &count);
+		while (!refused.empty() && !stopping &&
+		       std::chrono::steady_clock::now() < deadline) {
+			seen = state.waitForUpdate(seen, std::chrono::milliseconds(20));
+			refused = sender.encode(cmd, state.sensorFreshness(), frames, &count);
 		}
-		std::string send_error;
-		if (!input.socket()->send(frame, &send_error)) {
-			sendJson(res, { { "error", send_error } }, 503);
+		if (!refused.empty()) {
+			sendJson(res, { { "error", "not sent: " + refused } }, 503);
 			return;
 		}
-		json reply = { { "sent", frameHex(frame) } };
-		if (state.sensorAuthenticates())
+		json reply = { { "signed", sender.signing() } };
+		for (int i = 0; i < count; ++i) {
+			std::string send_error;
+			if (!input.socket()->send(frames[i], &send_error)) {
+				sendJson(res, { { "error", send_error } }, 503);
+				return;
+			}
+			reply[i == 0 ? "sent" : "mac_frame"] = candumpFrameText(frames[i]);
+		}
+		if (!sender.signing() && state.sensorAuthenticates())
 			reply["warning"] =
 				"the sensor authenticates commands (a CAN key): it refuses "
-				"this unsigned one";
+				"this unsigned one (start the view with --key FILE)";
 		sendJson(res, reply);
 	});
 	server.set_exception_handler(

@@ -3,7 +3,8 @@
  * dockpose view: the operator's page (docs/operator-view.md).
  *
  *   dockpose view [--can IFACE | --can-log FILE] [--preview NAME] [--bind ADDR]
- *                 [--port N] [--camera C.json] [--base-id ID] [--allow-commands]
+ *                 [--port N] [--camera C.json] [--base-id ID]
+ *                 [--allow-commands [--key FILE]]
  *
  * A web server (cpp-httplib) on ADDR:N (default 127.0.0.1:8080; --port 0 picks
  * a free port) serving one page (page.html, built into the binary) and:
@@ -19,7 +20,10 @@
  *                           then width x height grey pixels; 204 when none
  *   GET  /api/protocol      names and resolutions from dockpose_can.h
  *   GET  /api/config        what the server was started with (commands allowed, ...)
- *   POST /api/command       (--allow-commands with --can only) one DP_Command
+ *   POST /api/command       (--allow-commands with --can only) one DP_Command;
+ *                           with --key FILE signed (DP_CommandAuth, see
+ *                           command.h), and the sensor's frames verified with
+ *                           the same key before the page shows them
  *
  * The URL is printed on stdout ("dockpose view: http://ADDR:PORT/") once the
  * socket is bound. SIGINT or SIGTERM stop it (exit 0).
@@ -50,6 +54,7 @@ struct ViewArgs {
 	std::string camera; /* --camera: intrinsics, to draw the target's axes */
 	std::string base_id = "0x300";
 	bool allow_commands = false;
+	std::string key_file; /* --key: the CAN key, to sign commands */
 };
 
 /* Workers in httplib's pool: each open page holds one for its event stream. */

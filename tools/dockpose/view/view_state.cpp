@@ -12,6 +12,7 @@
 #include "algo/camera_model.h"
 #include "algo/io/model_json.h"
 #include "firmware/preview.h"
+#include "tools/dockpose/view/candump.h"
 
 namespace dockpose::tool {
 
@@ -22,17 +23,6 @@ using nlohmann::json;
 json vec3(const double (&v)[3])
 {
 	return json::array({ v[0], v[1], v[2] });
-}
-
-/* "305#0011223344556677": a frame as candump writes it, for a problem's detail. */
-std::string frameText(const can::RawFrame &frame)
-{
-	char text[40];
-	int n = std::snprintf(text, sizeof(text), "%03X#", static_cast<unsigned int>(frame.id));
-	for (std::size_t i = 0; i < frame.len && i < frame.data.size() && n < 36; ++i)
-		n += std::snprintf(text + n, sizeof(text) - static_cast<std::size_t>(n), "%02X",
-				   frame.data[i]);
-	return text;
 }
 
 json faultNames(std::uint8_t bits)
@@ -79,7 +69,7 @@ void ViewState::feed(const can::RawFrame &frame, std::int64_t arrival_us)
 	std::unique_lock<std::mutex> lock(mutex_);
 	const can::Decoder::Event event = decoder_.feed(frame, arrival_us);
 	if (event == can::Decoder::Event::Rejected)
-		noteProblem(can::frameErrorName(decoder_.lastError()), frameText(frame),
+		noteProblem(can::frameErrorName(decoder_.lastError()), candumpFrameText(frame),
 			    arrival_us);
 	afterFeed(event, arrival_us);
 	lock.unlock();
@@ -150,6 +140,10 @@ void ViewState::countProblems(std::int64_t now_us)
 		{ &can::Decoder::Counters::incomplete_poses,
 		  "incomplete pose (a pose frame missing)" },
 		{ &can::Decoder::Counters::stale_poses, "pose too old at arrival" },
+		/* With a key: a group whose MAC never came is dropped without a rejected frame
+		 * (keyless traffic to a keyed view, or its DP_Auth lost). */
+		{ &can::Decoder::Counters::unauthenticated,
+		  "not authenticated (a group without its MAC)" },
 	};
 	for (const auto &[member, name] : counted) {
 		if (c.*member > seen_counters_.*member)
@@ -309,7 +303,13 @@ json ViewState::stateJson(std::int64_t now_us) const
 		{ "stale_frames", c.stale_frames },
 		{ "stale_poses", c.stale_poses },
 		{ "undated_poses", c.undated_poses },
+		{ "auth_failures", c.auth_failures },
+		{ "replays", c.replays },
+		{ "unsynced", c.unsynced },
+		{ "unauthenticated", c.unauthenticated },
 	};
+	/* With a key: only what the sensor's MACs vouch for is shown. */
+	j["verifying"] = decoder_.authenticating();
 
 	json problems = json::array();
 	for (const auto &[name, p] : problems_)
@@ -457,6 +457,24 @@ bool ViewState::sensorAuthenticates() const
 {
 	const std::lock_guard<std::mutex> lock(mutex_);
 	return have_heartbeat_ && heartbeat_.authenticated;
+}
+
+Status ViewState::setKey(const std::array<std::uint8_t, can::kKeyBytes> &key)
+{
+	auto mac = std::make_unique<can::OpensslCmac>();
+	if (!mac->setKey(key))
+		return Status::error("OpenSSL has no AES-128 CMAC: the sensor's frames cannot be "
+				     "verified");
+	const std::lock_guard<std::mutex> lock(mutex_);
+	decoder_.setAuthenticator(mac.get());
+	mac_ = std::move(mac);
+	return Status::ok();
+}
+
+std::uint64_t ViewState::sensorFreshness() const
+{
+	const std::lock_guard<std::mutex> lock(mutex_);
+	return decoder_.authenticating() ? decoder_.freshness() : 0;
 }
 
 std::uint64_t ViewState::waitForUpdate(std::uint64_t seen, std::chrono::milliseconds timeout) const

@@ -12,6 +12,11 @@
  * reader's. Stale: no report for longer than max(3 report periods, 300 ms),
  * the period being the median of the last kPeriodSamples report intervals.
  *
+ * With a key (setKey, `dockpose view --key`) the decoder checks the sensor's
+ * MACs as a controller does: nothing is shown before its MAC checked, a
+ * refused group is a named problem, and the newest freshness value verified
+ * is what a signed command answers (sensorFreshness()).
+ *
  * Threads: the CAN reader thread calls feed*(), problem() and setPreview*();
  * any thread (httplib's pool) calls the *Json() functions and waitForUpdate().
  * One mutex guards everything; no call holds it for more than a copy.
@@ -21,6 +26,7 @@
  */
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -34,6 +40,7 @@
 
 #include "algo/status.h"
 #include "firmware/protocol/dockpose_can.h"
+#include "firmware/protocol/dockpose_can_cmac.h"
 
 namespace dockpose {
 class CameraModel;
@@ -103,6 +110,14 @@ public:
 	/* Whether the sensor says it authenticates (its heartbeat): unsigned commands are refused. */
 	bool sensorAuthenticates() const;
 
+	/* Verify the sensor's frames with this key from now on (an own OpenSSL context: the
+	 * reader thread's); an error when OpenSSL has no AES-128 CMAC. Before the reader
+	 * thread starts. Allocates OpenSSL's context. */
+	Status setKey(const std::array<std::uint8_t, can::kKeyBytes> &key);
+	/* The newest sensor freshness value whose MAC checked (0: none yet, or no key). Any
+	 * thread. */
+	std::uint64_t sensorFreshness() const;
+
 	/* A counter that moves on every report and problem; waits (any thread) until it
 	 * passes `seen` or `timeout` ends; returns it. wakeAll() ends every wait (shutdown). */
 	std::uint64_t waitForUpdate(std::uint64_t seen, std::chrono::milliseconds timeout) const;
@@ -136,6 +151,7 @@ private:
 	bool stopping_ = false;
 
 	can::Decoder decoder_;
+	std::unique_ptr<can::OpensslCmac> mac_; /* setKey(): the decoder's MAC */
 	can::Decoder::Counters seen_counters_{};
 	std::string source_;
 	std::unique_ptr<CameraModel> camera_;
