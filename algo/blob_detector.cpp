@@ -16,6 +16,7 @@
 #include "algo/blob_detector.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -85,6 +86,111 @@ struct Run {
 	int x0, x1; /* inclusive */
 	std::uint32_t label;
 };
+
+/*
+ * The sub-pixel fit of a small spot reads the pixels within this Chebyshev
+ * distance of its peak pixel: the 3 x 3 core it fits and, at the outer ring
+ * (7 x 7 border, 24 pixels), the local background.
+ */
+constexpr int kFitRing = 3;
+constexpr int kFitRingPixels = 8 * kFitRing;
+
+/*
+ * One axis of the three-point Gaussian fit: the offset of the peak from the
+ * middle sample of s[-1], s[0], s[1] (background-subtracted marginals, all
+ * > 0): d = (l- - l+) / (2 (l- - 2 l0 + l+)), l = ln s, exact for a sampled
+ * Gaussian whatever its width. grad gets dd/ds. False when the three are not
+ * a peak (the log profile not concave, or the peak beyond the next pixel).
+ */
+bool gaussianPeak3(const double s[3], double *d, double grad[3])
+{
+	const double a = std::log(s[0]), b = std::log(s[1]), c = std::log(s[2]);
+	const double den = a - 2.0 * b + c;
+	if (!(den < 0.0))
+		return false;
+	const double num = a - c;
+	*d = 0.5 * num / den;
+	if (!(std::abs(*d) <= 1.0))
+		return false;
+	grad[0] = (den - num) / (2.0 * den * den) / s[0];
+	grad[1] = num / (den * den) / s[1];
+	grad[2] = (-den - num) / (2.0 * den * den) / s[2];
+	return true;
+}
+
+/*
+ * The model-based centre of an unsaturated spot that the pixel grid
+ * undersamples (docs/vision.md, "Sub-pixel centre of small spots"). The
+ * thresholded, intensity-weighted centroid locks to the pixel grid there
+ * (pixels enter and leave the segmentation with the spot's sub-pixel phase:
+ * up to ~0.04 px at a blur sigma of 0.5-1.2 px). A pixel-integrated Gaussian
+ * is still a Gaussian to a good approximation, so a three-point fit on the
+ * log of the 3 x 3 core's background-subtracted marginals (row and column
+ * sums) has no such bias; its background is the median of the ring at
+ * kFitRing, where the spot has faded. Its covariance is the first-order
+ * propagation of the pixel noise s2 through the fit (each marginal sums 3
+ * pixels; the background is common to all). It replaces the centroid of
+ * every spot whose segmented pixels lie inside the ring (choosing the one
+ * with the smaller covariance let the choice follow the noise and the
+ * sub-pixel phase, and the locking came back). Allocates: never.
+ */
+void fitSmallSpot(const ImageView &image, double s2, Blob *b)
+{
+	const int cx = static_cast<int>(std::lround(b->u_px));
+	const int cy = static_cast<int>(std::lround(b->v_px));
+	if (cx - kFitRing < 0 || cy - kFitRing < 0 || cx + kFitRing >= image.width ||
+	    cy + kFitRing >= image.height)
+		return;
+	/* The ring must lie outside the segmented spot: larger spots keep their centroid. */
+	if (b->x_min <= cx - kFitRing || b->x_max >= cx + kFitRing || b->y_min <= cy - kFitRing ||
+	    b->y_max >= cy + kFitRing)
+		return;
+	std::array<std::uint8_t, kFitRingPixels> ring{};
+	std::size_t n = 0;
+	for (int k = -kFitRing; k < kFitRing; ++k) {
+		ring[n++] = image.at(cx + k, cy - kFitRing);
+		ring[n++] = image.at(cx + kFitRing, cy + k);
+		ring[n++] = image.at(cx - k, cy + kFitRing);
+		ring[n++] = image.at(cx - kFitRing, cy - k);
+	}
+	std::nth_element(ring.begin(), ring.begin() + kFitRingPixels / 2, ring.end());
+	const std::uint8_t upper = ring[kFitRingPixels / 2];
+	const std::uint8_t lower =
+		*std::max_element(ring.begin(), ring.begin() + kFitRingPixels / 2);
+	const double background = 0.5 * (static_cast<double>(lower) + upper);
+
+	double sx[3] = { 0.0, 0.0, 0.0 }, sy[3] = { 0.0, 0.0, 0.0 };
+	for (int j = -1; j <= 1; ++j)
+		for (int i = -1; i <= 1; ++i) {
+			const double v = static_cast<double>(image.at(cx + i, cy + j)) - background;
+			sx[i + 1] += v;
+			sy[j + 1] += v;
+		}
+	for (int k = 0; k < 3; ++k)
+		if (!(sx[k] > 0.0) || !(sy[k] > 0.0))
+			return;
+	double dx = 0.0, dy = 0.0, gx[3], gy[3];
+	if (!gaussianPeak3(sx, &dx, gx) || !gaussianPeak3(sy, &dy, gy))
+		return;
+
+	/*
+	 * Pixel (i, j) of the core enters sx[i] and sy[j], each marginal holds
+	 * 3 pixels and 3 times the background. The median of n samples has the
+	 * variance pi / 2 s2 / n (at least the rounding of one level).
+	 */
+	const double gxs = gx[0] + gx[1] + gx[2], gys = gy[0] + gy[1] + gy[2];
+	const double var_bg = std::max(0.5 * std::numbers::pi * s2 / kFitRingPixels, 1.0 / 12.0);
+	const double cuu = 3.0 * s2 * (gx[0] * gx[0] + gx[1] * gx[1] + gx[2] * gx[2]) +
+			   9.0 * var_bg * gxs * gxs;
+	const double cvv = 3.0 * s2 * (gy[0] * gy[0] + gy[1] * gy[1] + gy[2] * gy[2]) +
+			   9.0 * var_bg * gys * gys;
+	const double cuv = s2 * gxs * gys + 9.0 * var_bg * gxs * gys;
+	b->u_px = cx + dx;
+	b->v_px = cy + dy;
+	b->cov_uu_px2 = cuu;
+	b->cov_vv_px2 = cvv;
+	b->cov_uv_px2 = cuv;
+}
 
 } /* namespace */
 
@@ -741,6 +847,8 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 		Blob b = measure(m, noise);
 		if (b.cov_uu_px2 > 0.0)
 			correctBackgroundSlope(m, &b);
+		if (b.cov_uu_px2 > 0.0 && m.saturated == 0)
+			fitSmallSpot(image, std::max(noise * noise, kQuantisationVar), &b);
 		/*
 		 * A spot cut by the frame's edge lost an unknown part: its centroid
 		 * may be off by up to half its visible extent along that axis.

@@ -7,7 +7,10 @@
  *    them into components with union-find and accumulates integer,
  *    intensity-weighted moments; no label image;
  *  - clean-up (single pixels and specks dropped, gaps inside a row filled) and
- *    the shape filter (too elongated, too large, too small, too sparse).
+ *    the shape filter (too elongated, too large, too small, too sparse);
+ *  - for small unsaturated spots, a model-based sub-pixel centre (a
+ *    three-point Gaussian fit on the 3 x 3 core, which the pixel grid does not
+ *    lock) when its covariance is smaller than the centroid's.
  *
  * Weights: a segmented pixel of value v in a tile of level T weighs
  * w = v - T + 1 (>= 1), so a spot's centroid is not biased by the pixels that
@@ -58,7 +61,12 @@ struct BlobMoments {
 
 /* A blob that passed the clean-up and shape filter. */
 struct Blob {
-	double u_px = 0.0, v_px = 0.0; /* intensity-weighted centroid */
+	/*
+	 * Centre: the intensity-weighted centroid, or for a small unsaturated
+	 * spot the grid undersamples a three-point Gaussian fit (detect() only,
+	 * not measure(); see docs/vision.md).
+	 */
+	double u_px = 0.0, v_px = 0.0;
 	double area_px = 0.0; /* segmented pixels (gaps filled) */
 	double weight = 0.0; /* sum of weights */
 	double sigma_major_px = 0.0; /* weighted std-dev along the major axis */
