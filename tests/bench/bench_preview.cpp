@@ -8,7 +8,7 @@
  * projected), published into a real shared-memory ring.
  * The preview on two ways: inline (the frame loop downscales and publishes,
  * as before the worker), and through firmware::PreviewWorker (the frame loop
- * describes the frame and hands it over; a thread at nice 19 downscales and
+ * copies a snapshot of the frame and hands it over; a thread at nice 19 downscales and
  * publishes; the loop reclaims the frame at its next iteration, as Daemon::run
  * does). Median of repetitions; the ratios, measured in this one run, are
  * printed at the end.
@@ -122,7 +122,7 @@ void frameLoop(benchmark::State &state, PreviewPath path)
 		}
 	}
 	if (path == PreviewPath::Worker) {
-		if (auto s = worker.start(&preview); !s) {
+		if (auto s = worker.start(&preview, pipeline); !s) {
 			state.SkipWithError(s.message().c_str());
 			return;
 		}
