@@ -659,7 +659,7 @@ bool Daemon::startPreview()
 	/* The worker holds one camera buffer while it downscales: only with two more capturing. */
 	bool worker = false;
 	if (config_.camera.buffer_count >= 3) {
-		if (auto s = preview_worker_.start(&preview_); s)
+		if (auto s = preview_worker_.start(&preview_, *pipeline_); s)
 			worker = true;
 		else
 			std::fprintf(log_, "dockposed: %s; publishing in the frame loop\n",

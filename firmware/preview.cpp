@@ -24,8 +24,6 @@ namespace {
 /* The bytes of a frame after its sequence: what the seqlock guards. */
 constexpr std::size_t kBodyOffset = offsetof(PreviewFrame, frame_counter);
 constexpr std::size_t kBodyBytes = sizeof(PreviewFrame) - kBodyOffset;
-/* Of those, everything but the pixels: what describe() fills. */
-constexpr std::size_t kMetaBytes = offsetof(PreviewFrame, pixels) - kBodyOffset;
 
 std::uint8_t *body(PreviewFrame *f)
 {
@@ -179,9 +177,19 @@ void PreviewWriter::publish(const ImageView &image, std::uint64_t frame_counter,
 {
 	if (!accepts(image))
 		return;
+	PreviewSnapshot snapshot;
+	previewSnapshot(&snapshot, frame_counter, timestamp_ns, image.width, image.height, pipeline,
+			result, status);
+	publish(snapshot, image, pipeline.target(), pipeline.camera());
+}
+
+void PreviewWriter::publish(const PreviewSnapshot &snapshot, const ImageView &image,
+			    const TargetModel &target, const CameraModel &camera)
+{
+	if (!accepts(image))
+		return;
 	PreviewFrame &f = beginSlot();
-	describe(&f, frame_counter, timestamp_ns, image.width, image.height, pipeline, result,
-		 status);
+	describe(&f, snapshot, target, camera);
 	f.published_ns = hal::monotonicNs();
 	downscaleBox(image, factor_, f.pixels, width_, height_);
 	endSlot(f);
@@ -212,76 +220,101 @@ void PreviewWriter::endSlot(PreviewFrame &f)
 	ring_->published.store(n + 1, std::memory_order_release);
 }
 
-void PreviewWriter::publishDescribed(const PreviewFrame &meta, const ImageView &image)
+void previewSnapshot(PreviewSnapshot *out, std::uint64_t frame_counter, std::int64_t timestamp_ns,
+		     int image_width, int image_height, const Pipeline &pipeline,
+		     const PoseResult *result, PreviewStatus status)
 {
-	if (!accepts(image))
-		return;
-	PreviewFrame &f = beginSlot();
-	std::memcpy(body(&f), body(&meta), kMetaBytes);
-	f.published_ns = hal::monotonicNs();
-	downscaleBox(image, factor_, f.pixels, width_, height_);
-	endSlot(f);
-}
-
-void PreviewWriter::describe(PreviewFrame *out, std::uint64_t frame_counter,
-			     std::int64_t timestamp_ns, int image_width, int image_height,
-			     const Pipeline &pipeline, const PoseResult *result,
-			     PreviewStatus status) const
-{
-	PreviewFrame &f = *out;
-	f.frame_counter = frame_counter;
-	f.timestamp_ns = timestamp_ns;
-	f.width = static_cast<std::uint16_t>(width_);
-	f.height = static_cast<std::uint16_t>(height_);
-	f.full_width = static_cast<std::uint16_t>(image_width);
-	f.full_height = static_cast<std::uint16_t>(image_height);
-	f.state = status.state;
-	f.faults = status.faults;
-
-	const bool found = result && result->found;
-	f.found = found ? 1 : 0;
-	f.pose_status = static_cast<std::uint8_t>(result ? result->status : PoseStatus::NoFrame);
-	f.tracked = found && result->tracked ? 1 : 0;
-	f.leds_used = found ? result->leds_used : 0;
-	f.led_mask = found ? result->led_mask : 0;
-	for (int i = 0; i < 3; ++i) {
-		f.t_mm[i] = found ? result->t_mm[i] : 0.0;
-		f.rpy_deg[i] = found ? result->rpy_deg[i] : 0.0;
-		f.sigma_t_mm[i] = found ? result->sigma_t_mm[i] : 0.0;
-		f.sigma_rpy_deg[i] = found ? result->sigma_rpy_deg[i] : 0.0;
+	PreviewSnapshot &s = *out;
+	s.frame_counter = frame_counter;
+	s.timestamp_ns = timestamp_ns;
+	s.full_width = static_cast<std::uint16_t>(image_width);
+	s.full_height = static_cast<std::uint16_t>(image_height);
+	s.status = status;
+	s.pose_status = static_cast<std::uint8_t>(result ? result->status : PoseStatus::NoFrame);
+	s.found = result && result->found;
+	s.tracked = s.found && result->tracked;
+	s.leds_used = s.found ? result->leds_used : 0;
+	s.led_mask = s.found ? result->led_mask : 0;
+	if (s.found) {
+		for (int r = 0; r < 3; ++r)
+			for (int c = 0; c < 3; ++c)
+				s.R[3 * r + c] = result->R(r, c);
+		for (int i = 0; i < 3; ++i) {
+			s.t_mm[i] = result->t_mm[i];
+			s.rpy_deg[i] = result->rpy_deg[i];
+			s.sigma_t_mm[i] = result->sigma_t_mm[i];
+			s.sigma_rpy_deg[i] = result->sigma_rpy_deg[i];
+		}
+		s.q_wxyz[0] = result->q.w();
+		s.q_wxyz[1] = result->q.x();
+		s.q_wxyz[2] = result->q.y();
+		s.q_wxyz[3] = result->q.z();
+		s.rms_px = result->rms_px;
+		s.log10_nfa = result->log10_nfa;
 	}
-	f.q_wxyz[0] = found ? result->q.w() : 1.0;
-	f.q_wxyz[1] = found ? result->q.x() : 0.0;
-	f.q_wxyz[2] = found ? result->q.y() : 0.0;
-	f.q_wxyz[3] = found ? result->q.z() : 0.0;
-	f.rms_px = found ? result->rms_px : 0.0;
-	f.log10_nfa = found ? result->log10_nfa : 0.0;
 
 	const auto &blobs = pipeline.blobs();
-	f.blob_count =
+	s.blob_count =
 		static_cast<std::uint32_t>(std::min<std::size_t>(blobs.size(), kMaxCandidates));
-	for (std::uint32_t i = 0; i < f.blob_count; ++i) {
-		PreviewBlob &b = f.blobs[i];
+	for (std::uint32_t i = 0; i < s.blob_count; ++i) {
+		PreviewBlob &b = s.blobs[i];
 		b.u_px = static_cast<float>(blobs[i].u_px);
 		b.v_px = static_cast<float>(blobs[i].v_px);
 		b.area_px = static_cast<float>(blobs[i].area_px);
 		b.peak = blobs[i].peak;
 		b.matched = 0;
 	}
+}
 
-	const TargetModel &model = pipeline.target();
-	const CameraModel &camera = pipeline.camera();
+void PreviewWriter::describe(PreviewFrame *out, const PreviewSnapshot &s, const TargetModel &model,
+			     const CameraModel &camera) const
+{
+	PreviewFrame &f = *out;
+	f.frame_counter = s.frame_counter;
+	f.timestamp_ns = s.timestamp_ns;
+	f.width = static_cast<std::uint16_t>(width_);
+	f.height = static_cast<std::uint16_t>(height_);
+	f.full_width = s.full_width;
+	f.full_height = s.full_height;
+	f.state = s.status.state;
+	f.faults = s.status.faults;
+
+	const bool found = s.found;
+	f.found = found ? 1 : 0;
+	f.pose_status = s.pose_status;
+	f.tracked = s.tracked ? 1 : 0;
+	f.leds_used = s.leds_used;
+	f.led_mask = s.led_mask;
+	for (int i = 0; i < 3; ++i) {
+		f.t_mm[i] = found ? s.t_mm[i] : 0.0;
+		f.rpy_deg[i] = found ? s.rpy_deg[i] : 0.0;
+		f.sigma_t_mm[i] = found ? s.sigma_t_mm[i] : 0.0;
+		f.sigma_rpy_deg[i] = found ? s.sigma_rpy_deg[i] : 0.0;
+	}
+	for (int i = 0; i < 4; ++i)
+		f.q_wxyz[i] = found ? s.q_wxyz[i] : (i == 0 ? 1.0 : 0.0);
+	f.rms_px = found ? s.rms_px : 0.0;
+	f.log10_nfa = found ? s.log10_nfa : 0.0;
+
+	f.blob_count = s.blob_count;
+	std::copy(s.blobs, s.blobs + s.blob_count, f.blobs);
+
+	Eigen::Matrix3d R;
+	for (int r = 0; r < 3; ++r)
+		for (int c = 0; c < 3; ++c)
+			R(r, c) = s.R[3 * r + c];
+	const Eigen::Vector3d t(s.t_mm[0], s.t_mm[1], s.t_mm[2]);
 	f.led_count = static_cast<std::uint32_t>(model.points_mm.size());
 	for (std::uint32_t i = 0; i < f.led_count; ++i) {
 		PreviewLed &led = f.leds[i];
 		led.index = static_cast<std::uint8_t>(i);
-		led.matched = found && (result->led_mask & (1u << i)) ? 1 : 0;
+		led.matched = found && (s.led_mask & (1u << i)) ? 1 : 0;
 		led.visible = 0;
 		led.u_px = led.v_px = 0.0f;
 		if (!found)
 			continue;
 		Eigen::Vector2d uv;
-		if (!camera.project(result->R * model.points_mm[i] + result->t_mm, &uv))
+		if (!camera.project(R * model.points_mm[i] + t, &uv))
 			continue;
 		led.u_px = static_cast<float>(uv.x());
 		led.v_px = static_cast<float>(uv.y());
@@ -293,7 +326,8 @@ void PreviewWriter::describe(PreviewFrame *out, std::uint64_t frame_counter,
 		double best = std::numeric_limits<double>::max();
 		std::uint32_t best_i = f.blob_count;
 		for (std::uint32_t k = 0; k < f.blob_count; ++k) {
-			const double du = blobs[k].u_px - uv.x(), dv = blobs[k].v_px - uv.y();
+			const double du = static_cast<double>(s.blobs[k].u_px) - uv.x();
+			const double dv = static_cast<double>(s.blobs[k].v_px) - uv.y();
 			const double d2 = du * du + dv * dv;
 			if (d2 < best) {
 				best = d2;

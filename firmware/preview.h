@@ -15,8 +15,9 @@
  * kPreviewVersion; a reader refuses another magic, version or size.
  *
  * Threads: a PreviewWriter belongs to one writer thread at a time (the frame
- * thread, or the PreviewWorker's thread with describe() on the frame thread); a PreviewReader to
- * its reader's thread; any number of processes may read.
+ * thread, or the PreviewWorker's thread, to which the frame thread hands a
+ * PreviewSnapshot); a PreviewReader to its reader's thread; any number of
+ * processes may read.
  */
 #pragma once
 
@@ -108,6 +109,41 @@ struct PreviewStatus {
 };
 
 /*
+ * What the preview takes of one frame from the frame thread: the frame's
+ * identity, the sensor's status, the pose and the candidate blobs of the
+ * pipeline's last process(). Plain data of fixed size (about 1.3 KB): copying
+ * it is all the frame thread pays for a preview frame handed to the worker;
+ * the LEDs are projected and the matched blobs marked from it later
+ * (PreviewWriter::publish(const PreviewSnapshot &, ...)).
+ */
+struct PreviewSnapshot {
+	std::uint64_t frame_counter = 0;
+	std::int64_t timestamp_ns = 0;
+	std::uint16_t full_width = 0, full_height = 0;
+	PreviewStatus status;
+	std::uint8_t pose_status = 0; /* PoseStatus */
+	bool found = false; /* the pose fields below are set only when found */
+	bool tracked = false;
+	std::int32_t leds_used = 0;
+	std::uint32_t led_mask = 0;
+	double R[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 }; /* target to camera, row-major */
+	double t_mm[3] = {}, q_wxyz[4] = { 1, 0, 0, 0 }, rpy_deg[3] = {};
+	double sigma_t_mm[3] = {}, sigma_rpy_deg[3] = {};
+	double rms_px = 0.0, log10_nfa = 0.0;
+	std::uint32_t blob_count = 0;
+	PreviewBlob blobs[kMaxCandidates]; /* .matched 0: set when described */
+};
+
+/*
+ * Fill *out from `pipeline`'s last process() on an image_width x
+ * image_height frame and `result` (nullptr: no pose). The blobs are copied
+ * only up to their count. Allocates: never. The pipeline's thread.
+ */
+void previewSnapshot(PreviewSnapshot *out, std::uint64_t frame_counter, std::int64_t timestamp_ns,
+		     int image_width, int image_height, const Pipeline &pipeline,
+		     const PoseResult *result, PreviewStatus status);
+
+/*
  * The shared-memory name of preview.name (a POSIX name: "/" + name).
  * Allocates: the string.
  */
@@ -154,27 +190,25 @@ public:
 	 */
 	void publish(const ImageView &image, std::uint64_t frame_counter, std::int64_t timestamp_ns,
 		     const Pipeline &pipeline, const PoseResult *result, PreviewStatus status);
-
 	/*
-	 * publish() in two halves, for a worker thread (firmware/preview_worker.h).
-	 * describe(): everything of a frame but its pixels and published_ns into
-	 * *out (a PreviewFrame outside the ring), from `pipeline`'s last process()
-	 * on an image_width x image_height frame; the caller's thread (it reads
-	 * the pipeline). Allocates: never.
+	 * Publish `snapshot`'s frame: `image` (the frame it was taken of)
+	 * downscaled, the snapshot, the model's faces and its LEDs projected
+	 * from the pose with `camera` (and the blob nearest each matched LED's
+	 * projection marked matched). `target` and `camera`: the models of the
+	 * pipeline the snapshot came from. Allocates: never. The one writer
+	 * thread (firmware/preview_worker.h), never at the same time as another
+	 * publish().
 	 */
-	void describe(PreviewFrame *out, std::uint64_t frame_counter, std::int64_t timestamp_ns,
-		      int image_width, int image_height, const Pipeline &pipeline,
-		      const PoseResult *result, PreviewStatus status) const;
-	/*
-	 * Publish `meta` (from describe()) with `image` downscaled. Allocates:
-	 * never. The one writer thread: never at the same time as publish().
-	 */
-	void publishDescribed(const PreviewFrame &meta, const ImageView &image);
+	void publish(const PreviewSnapshot &snapshot, const ImageView &image,
+		     const TargetModel &target, const CameraModel &camera);
 
 	std::uint64_t published() const;
 
 private:
 	bool accepts(const ImageView &image) const;
+	/* Everything of a frame but its pixels and published_ns, into *out. */
+	void describe(PreviewFrame *out, const PreviewSnapshot &s, const TargetModel &model,
+		      const CameraModel &camera) const;
 	/* The next slot, its sequence made odd; endSlot() makes it even and counts it. */
 	PreviewFrame &beginSlot();
 	void endSlot(PreviewFrame &f);

@@ -4,6 +4,8 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <ctime>
+
 namespace dockpose::firmware {
 
 PreviewWorker::~PreviewWorker()
@@ -11,15 +13,15 @@ PreviewWorker::~PreviewWorker()
 	stop();
 }
 
-hal::Status PreviewWorker::start(PreviewWriter *writer)
+hal::Status PreviewWorker::start(PreviewWriter *writer, const Pipeline &pipeline)
 {
 	if (running())
 		return hal::Status::ok();
 	if (!writer || !writer->isOpen())
 		return hal::Status::error("preview worker: the preview ring is not open");
 	writer_ = writer;
-	if (!meta_)
-		meta_ = std::make_unique<PreviewFrame>();
+	target_ = pipeline.target();
+	camera_.emplace(pipeline.camera());
 	stopping_.store(false, std::memory_order_relaxed);
 	thread_ = std::thread([this] { loop(); });
 	return hal::Status::ok();
@@ -30,9 +32,7 @@ void PreviewWorker::stop()
 	if (!running())
 		return;
 	stopping_.store(true, std::memory_order_release);
-	wake_.fetch_add(1, std::memory_order_release);
-	wake_.notify_one();
-	thread_.join();
+	thread_.join(); /* within a poll period (and the frame in hand, if any) */
 }
 
 bool PreviewWorker::submit(const hal::Frame &frame, const Pipeline &pipeline,
@@ -42,14 +42,12 @@ bool PreviewWorker::submit(const hal::Frame &frame, const Pipeline &pipeline,
 		skipped_.fetch_add(1, std::memory_order_relaxed);
 		return false;
 	}
-	/* Idle: job_ is the frame thread's until Pending is stored. */
-	writer_->describe(meta_.get(), frame.sequence, frame.timestamp_ns, frame.image.width,
-			  frame.image.height, pipeline, result, status);
+	/* Idle: the job is the frame thread's until Pending is stored. */
+	previewSnapshot(&snapshot_, frame.sequence, frame.timestamp_ns, frame.image.width,
+			frame.image.height, pipeline, result, status);
 	frame_ = frame;
 	state_.store(Pending, std::memory_order_release);
 	handed_.fetch_add(1, std::memory_order_relaxed);
-	wake_.fetch_add(1, std::memory_order_release);
-	wake_.notify_one();
 	return true;
 }
 
@@ -70,6 +68,7 @@ bool PreviewWorker::drain(hal::Frame *frame)
 			return false;
 		if (s == Done)
 			return reclaim(frame);
+		/* Pending or Working: the worker notifies when it stores Done. */
 		state_.wait(s, std::memory_order_acquire);
 	}
 }
@@ -81,16 +80,18 @@ void PreviewWorker::loop()
 	 * starve it, and every preview frame would be skipped. */
 	(void)setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 19);
 	for (;;) {
-		const std::uint32_t seen = wake_.load(std::memory_order_acquire);
 		if (state_.load(std::memory_order_acquire) == Pending) {
-			writer_->publishDescribed(*meta_, frame_.image);
+			/* Only this thread moves the state on from Pending. */
+			state_.store(Working, std::memory_order_relaxed);
+			writer_->publish(snapshot_, frame_.image, target_, *camera_);
 			state_.store(Done, std::memory_order_release);
 			state_.notify_one(); /* drain() may wait for it */
 			continue;
 		}
 		if (stopping_.load(std::memory_order_acquire))
 			return;
-		wake_.wait(seen, std::memory_order_acquire);
+		const timespec poll{ 0, kPreviewPollNs };
+		(void)clock_nanosleep(CLOCK_MONOTONIC, 0, &poll, nullptr);
 	}
 }
 

@@ -1,21 +1,29 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * PreviewWorker: the operator preview off the frame loop. The frame thread
- * describes a frame (the pipeline's blobs, the pose, the LEDs projected: a
- * few KB, PreviewWriter::describe) and hands the worker that description and
- * the camera frame itself, still held: the frame thread does not release the
- * frame's buffer but leaves it to the worker, which downscales its pixels
- * into the ring and publishes it (PreviewWriter::publishDescribed), then
- * gives the frame back. The frame thread collects it (reclaim()) and releases
- * it to the camera: the camera is only ever called from the frame thread.
+ * PreviewWorker: the operator preview off the frame loop. For a preview
+ * frame the frame thread copies a PreviewSnapshot (the pose, the blobs: about
+ * 1.3 KB of plain data, firmware/preview.h) and hands the worker that and the
+ * camera frame itself, still held: the frame thread does not release the
+ * frame's buffer but leaves it to the worker, which projects the LEDs,
+ * downscales the pixels into the ring and publishes them
+ * (PreviewWriter::publish(const PreviewSnapshot &, ...)), then gives the
+ * frame back. The frame thread collects it (reclaim()) and releases it to the
+ * camera: the camera is only ever called from the frame thread.
+ *
+ * The hand-over is a store of an atomic state, no system call: waking a
+ * sleeping thread (a futex wake) costs the waker several µs, more than the
+ * rest of the hand-over. The worker instead polls the state every
+ * kPreviewPollNs, sleeping in between; that delays a preview frame by at most
+ * one poll period, a small part of the preview's period (preview.rate_hz is
+ * at most 10 Hz: 100 ms or more).
  *
  * The frame thread never waits for the worker: while the worker still has a
  * frame, the next preview frame is skipped and counted (skipped()). So at
  * most one camera buffer is held for the preview at a time; the daemon uses
  * the worker only when the camera has at least 3 buffers (one held, two
  * capturing). Before the camera is stopped (a stall's restart, shutdown) the
- * frame thread calls drain(), which waits for the frame in hand (one
- * downscale, about a millisecond) and gives it back: then, and only then,
+ * frame thread calls drain(), which waits for the frame in hand (at most a
+ * poll period, then one downscale) and gives it back: then, and only then,
  * the frame thread waits.
  *
  * The worker thread runs at nice 19 (SCHED_OTHER, the lowest weight): on a
@@ -23,28 +31,33 @@
  * gets little time beside the frame loop (a real-time frame thread, none)
  * and preview frames are skipped rather than the loop delayed.
  *
- * Threads and ownership: state_ says who owns job_: Idle and Done the frame
- * thread, Pending the worker. start(), stop(), submit(), reclaim(), drain()
- * from the frame thread (start/stop: the thread that owns the daemon);
- * skipped() and handed() from any thread. The PreviewWriter is written by
- * the worker while it runs; the frame thread only calls its describe()
- * (const, reads what open() set) meanwhile.
+ * Threads and ownership: state_ says who owns the job (snapshot_, frame_):
+ * Idle and Done the frame thread, Pending and Working the worker. start(),
+ * stop(), submit(), reclaim(), drain() from the frame thread (start/stop: the
+ * thread that owns the daemon); skipped(), handed() and pending() from any
+ * thread. The PreviewWriter is the worker's while it runs; the worker has
+ * its own copies of the target and camera models (taken by start()).
  *
- * Allocates: start() (the thread, the description); never after.
+ * Allocates: start() (the thread, the models' copies); never after.
  */
 #pragma once
 
 #include <atomic>
 #include <cstdint>
-#include <memory>
+#include <optional>
 #include <thread>
 
+#include "algo/camera_model.h"
 #include "algo/pipeline.h"
+#include "algo/target_model.h"
 #include "firmware/preview.h"
 #include "hal/camera.h"
 #include "hal/status.h"
 
 namespace dockpose::firmware {
+
+/* The worker's poll period: the most a handed frame waits before the worker takes it up. */
+constexpr std::int64_t kPreviewPollNs = 2'000'000;
 
 class PreviewWorker
 {
@@ -55,18 +68,23 @@ public:
 	/* Stops the thread: call drain() first if a frame may be in hand. */
 	~PreviewWorker();
 
-	/* Start the thread publishing into *writer (open, outliving the worker). Allocates. */
-	hal::Status start(PreviewWriter *writer);
+	/*
+	 * Start the thread publishing into *writer (open, outliving the worker)
+	 * the frames of `pipeline` (its target and camera models are copied).
+	 * Allocates.
+	 */
+	hal::Status start(PreviewWriter *writer, const Pipeline &pipeline);
 	/* Finish the frame in hand (it stays to be reclaimed) and join the thread. Idempotent. */
 	void stop();
 	bool running() const { return thread_.joinable(); }
 
 	/*
-	 * Hand over `frame` (held, not released) described from `pipeline`'s last
-	 * process() and `result`. True: the worker has it, and the caller must not
-	 * release it but reclaim() it later. False: the worker is still busy (or
-	 * not running): the preview frame is skipped and counted; release the
-	 * frame as usual. Never waits. Allocates: never.
+	 * Hand over `frame` (held, not released) with a snapshot of `pipeline`'s
+	 * last process() and `result` (the pipeline given to start()). True: the
+	 * worker has it, and the caller must not release it but reclaim() it
+	 * later. False: the worker is still busy (or not running): the preview
+	 * frame is skipped and counted; release the frame as usual. Never waits,
+	 * no system call. Allocates: never.
 	 */
 	bool submit(const hal::Frame &frame, const Pipeline &pipeline, const PoseResult *result,
 		    PreviewStatus status);
@@ -79,21 +97,25 @@ public:
 	std::uint64_t skipped() const { return skipped_.load(std::memory_order_relaxed); }
 	/* Preview frames handed to the worker. Any thread. */
 	std::uint64_t handed() const { return handed_.load(std::memory_order_relaxed); }
+	/* A frame is handed over and the worker has not taken it up yet (its next poll). Any thread. */
+	bool pending() const { return state_.load(std::memory_order_relaxed) == Pending; }
 
 private:
 	enum State : std::uint32_t {
 		Idle,
 		Pending,
+		Working,
 		Done
 	};
 
 	void loop();
 
 	PreviewWriter *writer_ = nullptr;
-	std::unique_ptr<PreviewFrame> meta_; /* the job's description (no pixels used) */
+	TargetModel target_;
+	std::optional<CameraModel> camera_; /* set by start() */
+	PreviewSnapshot snapshot_; /* the job's pose and blobs */
 	hal::Frame frame_; /* the job's frame */
 	std::atomic<std::uint32_t> state_{ Idle };
-	std::atomic<std::uint32_t> wake_{ 0 }; /* bumped to wake the worker */
 	std::atomic<bool> stopping_{ false };
 	std::atomic<std::uint64_t> skipped_{ 0 };
 	std::atomic<std::uint64_t> handed_{ 0 };

@@ -8,17 +8,21 @@
  * projected), published into a real shared-memory ring.
  * The preview on two ways: inline (the frame loop downscales and publishes,
  * as before the worker), and through firmware::PreviewWorker (the frame loop
- * describes the frame and hands it over; a thread at nice 19 downscales and
- * publishes; the loop reclaims the frame at its next iteration, as Daemon::run
- * does). Median of repetitions; the ratios, measured in this one run, are
- * printed at the end.
+ * copies a snapshot of the frame's pose and blobs and hands it over with the
+ * frame; a thread at nice 19, polling every kPreviewPollNs, projects the LEDs,
+ * downscales and publishes; the loop reclaims the frame at its next
+ * iteration, as Daemon::run does). Median of repetitions, run interleaved;
+ * the ratios, measured in this one run, are printed at the end.
  * Goal: per-frame time of the frame loop with the preview on within 5 % of it
  * off. The worker's own CPU time is not in the frame loop's time: with a core
- * to spare (2 cores, the frame loop on one) it runs beside the loop.
+ * to spare (2 cores, the frame loop on one) it runs beside the loop; but its
+ * downscale, run during the loop's next frames, is (what it costs the loop
+ * through the shared cache and memory).
  */
 #include <unistd.h>
 
 #include <cstdio>
+#include <ctime>
 #include <map>
 #include <string>
 #include <vector>
@@ -40,6 +44,8 @@ namespace {
 constexpr int kFrames = 60; /* one second at 60 frames/s */
 constexpr int kPreviewEvery = 6; /* 60 frames/s at preview.rate_hz 10 */
 constexpr int kPreviewWidth = 320;
+/* Per repetition: 500 preview frames (each pause sleeps a poll period: fixed, not timed). */
+constexpr benchmark::IterationCount kIterations = 3000;
 
 struct Fixture {
 	TargetModel target;
@@ -69,6 +75,12 @@ const Fixture &fixture()
 		return x;
 	}();
 	return f;
+}
+
+void nap(std::int64_t ns)
+{
+	const timespec t{ 0, static_cast<long>(ns) };
+	(void)clock_nanosleep(CLOCK_MONOTONIC, 0, &t, nullptr);
 }
 
 enum class PreviewPath {
@@ -122,22 +134,34 @@ void frameLoop(benchmark::State &state, PreviewPath path)
 		}
 	}
 	if (path == PreviewPath::Worker) {
-		if (auto s = worker.start(&preview); !s) {
+		if (auto s = worker.start(&preview, pipeline); !s) {
 			state.SkipWithError(s.message().c_str());
 			return;
 		}
 	}
+	using firmware::kPreviewPollNs;
 	int i = 0;
 	for (auto _ : state) {
 		/* In the daemon the worker has 5 frame periods (83 ms at 60 frames/s) between two
-		 * preview frames; flat out here it has 5 x ~20 us, and at nice 19 on a loaded machine
-		 * it would skip nearly every frame, which would measure the skip. So before each
-		 * preview frame, outside the timed region, the worker finishes the last one; the
-		 * same pause in all three loops, so its overhead is the same in each. */
+		 * preview frames to take a frame up (its poll, every kPreviewPollNs) and publish it;
+		 * flat out here it has 5 x ~20 us, and would skip nearly every frame, which would
+		 * measure the skip. So, outside the timed region: before each preview frame the
+		 * worker finishes the last one; before the frame after it, the loop sleeps a poll
+		 * period, and the worker has taken the frame up — its downscale then runs beside
+		 * the loop's timed frames, as it may in the daemon. The same pauses and the same
+		 * sleep in every loop (a thread that slept may find its caches colder, as the daemon's
+		 * frame thread does after each wait for the camera), so they cost each the same. */
 		if (i % kPreviewEvery == 0) {
 			state.PauseTiming();
 			if (hal::Frame done; path == PreviewPath::Worker)
 				benchmark::DoNotOptimize(worker.drain(&done));
+			state.ResumeTiming();
+		} else if (i % kPreviewEvery == 1) {
+			state.PauseTiming();
+			nap(kPreviewPollNs);
+			while (path == PreviewPath::Worker && worker.pending())
+				nap(kPreviewPollNs /
+				    10); /* a loaded machine: the worker's turn comes late */
 			state.ResumeTiming();
 		}
 		frameWork(pipeline, encoder, f.frames[static_cast<std::size_t>(i % kFrames)],
@@ -170,21 +194,31 @@ void frameLoopPreviewWorker(benchmark::State &state)
 } /* namespace */
 
 BENCHMARK(frameLoopPreviewOff)
+	->Iterations(kIterations)
 	->Repetitions(9)
 	->ReportAggregatesOnly(true)
 	->Unit(benchmark::kMicrosecond);
 BENCHMARK(frameLoopPreviewInline)
+	->Iterations(kIterations)
 	->Repetitions(9)
 	->ReportAggregatesOnly(true)
 	->Unit(benchmark::kMicrosecond);
 BENCHMARK(frameLoopPreviewWorker)
+	->Iterations(kIterations)
 	->Repetitions(9)
 	->ReportAggregatesOnly(true)
 	->Unit(benchmark::kMicrosecond);
 
 int main(int argc, char **argv)
 {
-	benchmark::Initialize(&argc, argv);
+	/* The repetitions of the three loops interleaved in random order (a later flag overrides):
+	 * on a shared machine, load that comes and goes then falls on each loop alike, not on
+	 * whichever ran at the time. */
+	std::vector<char *> args(argv, argv + argc);
+	static char interleave[] = "--benchmark_enable_random_interleaving=true";
+	args.insert(args.begin() + 1, interleave);
+	int args_count = static_cast<int>(args.size());
+	benchmark::Initialize(&args_count, args.data());
 	bench::RatioReporter reporter;
 	benchmark::RunSpecifiedBenchmarks(&reporter);
 	auto &m = reporter.median_us;

@@ -181,7 +181,7 @@ TEST(Preview, TheWorkerPublishesOffTheFrameThreadAndHandsTheFrameBack)
 	hal::Frame back;
 	EXPECT_FALSE(worker.submit(hal::Frame{}, pipeline, &result, {})) << "not started";
 	EXPECT_EQ(worker.skipped(), 1u);
-	ASSERT_TRUE(worker.start(&writer).isOk());
+	ASSERT_TRUE(worker.start(&writer, pipeline).isOk());
 
 	hal::Frame frame;
 	frame.image = image.view();
@@ -193,6 +193,7 @@ TEST(Preview, TheWorkerPublishesOffTheFrameThreadAndHandsTheFrameBack)
 	EXPECT_FALSE(worker.submit(frame, pipeline, &result, { 3, 0x01 }));
 	EXPECT_EQ(worker.skipped(), 2u);
 	ASSERT_TRUE(worker.drain(&back));
+	EXPECT_FALSE(worker.pending()) << "drained: taken up and done";
 	EXPECT_EQ(back.slot, 2) << "the held frame comes back to be released";
 	EXPECT_EQ(back.sequence, 77u);
 	EXPECT_FALSE(worker.reclaim(&back)) << "handed back once";
