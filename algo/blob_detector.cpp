@@ -179,7 +179,8 @@ void fitSmallSpot(const ImageView &image, double s2, Blob *b)
 	 * variance pi / 2 s2 / n (at least the rounding of one level).
 	 */
 	const double gxs = gx[0] + gx[1] + gx[2], gys = gy[0] + gy[1] + gy[2];
-	const double var_bg = std::max(0.5 * std::numbers::pi * s2 / kFitRingPixels, 1.0 / 12.0);
+	const double var_bg =
+		std::max(0.5 * std::numbers::pi * s2 / kFitRingPixels, kQuantisationVar);
 	const double cuu = 3.0 * s2 * (gx[0] * gx[0] + gx[1] * gx[1] + gx[2] * gx[2]) +
 			   9.0 * var_bg * gxs * gxs;
 	const double cvv = 3.0 * s2 * (gy[0] * gy[0] + gy[1] * gy[1] + gy[2] * gy[2]) +
