@@ -593,10 +593,10 @@ int Correspondence::minLeds(bool tracking) const
 				    total));
 }
 
-/* The 99.9 % point of chi2 for the fit's 2k - 6 degrees of freedom (Wilson-Hilferty). */
-double Correspondence::chi2Bound(const Hypothesis &h) const
+/* The 99.9 % point of chi2 for a fit's 2k - 6 degrees of freedom, k points (Wilson-Hilferty). */
+double Correspondence::chi2Bound(int points)
 {
-	const double dof = std::max(2.0 * static_cast<double>(h.match.pairs.size()) - 6.0, 1.0);
+	const double dof = std::max(2.0 * static_cast<double>(points) - 6.0, 1.0);
 	const double c = 2.0 / (9.0 * dof);
 	return dof * std::pow(1.0 - c + 3.09 * std::sqrt(c), 3.0);
 }
@@ -604,7 +604,7 @@ double Correspondence::chi2Bound(const Hypothesis &h) const
 /* The residuals are what the centroids' covariance predicts (chi2 within its 99.9 % point, x slack^2). */
 bool Correspondence::fitStatistical(const Hypothesis &h, double slack) const
 {
-	return h.refined.chi2 <= slack * slack * chi2Bound(h);
+	return h.refined.chi2 <= slack * slack * chi2Bound(static_cast<int>(h.match.pairs.size()));
 }
 
 /*
@@ -814,7 +814,7 @@ void Correspondence::keep(const Hypothesis &h)
  * good enough to stop the search.
  */
 bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4],
-				   std::size_t f, const int vertex[4])
+				   const Eigen::Matrix2d cov[4], std::size_t f, const int vertex[4])
 {
 	++hypotheses_;
 	Eigen::Vector2d plane[4];
@@ -865,7 +865,7 @@ bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vect
 	Pose pose;
 	if (!solveFourCoplanar(model, q, &pose))
 		return false;
-	return verify(pose, f, model, uv);
+	return verify(pose, f, model, uv, cov);
 }
 
 /*
@@ -890,7 +890,7 @@ Pose Correspondence::mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_
 
 /* The checks every hypothesis pose goes through, then verification; true: stop the search. */
 bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4],
-			    const Eigen::Vector2d uv[4])
+			    const Eigen::Vector2d uv[4], const Eigen::Matrix2d cov[4])
 {
 	if (!faceVisible(pose, f) || !plausible(pose))
 		return false;
@@ -905,7 +905,6 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
 
 	if (verified_ >= config_.max_verifications)
 		return false;
-	++verified_;
 	/*
 	 * The face's own four points first: a closed-form pose may be too rough
 	 * for the normal gate far from the face, so it is matched with a wider
@@ -913,17 +912,31 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
 	 * px off a wedge's far LED at 372 mm), and the fit it pulls can settle in
 	 * the face's other minimum, leaving the field to its in-plane half turn.
 	 * Refined on its own points and fitting them, the pose gets the normal gate.
+	 *
+	 * Four points that are this face fit it as their centroids' noise (or the
+	 * px floor) allows. When the fit converged and its error is beyond the
+	 * loosest bound any kept hypothesis is held to (a rival with more LEDs:
+	 * 4 max_rms_px, or chi2 16 times its 99.9 % point), the quadrilateral is
+	 * not the face and is not verified: most chance quadrilaterals that pass
+	 * the invariant screen end here, before matching and refinement.
 	 */
 	Pose start = pose;
 	double first_gate = 2.0 * gate;
 	RefineOptions own_options = config_.refine;
 	own_options.covariance = false;
+	own_options.led_sigma_mm = target_.led_sigma_mm;
 	RefineResult own;
-	if (refinePose(camera_, model, uv, 4, pose, own_options, &own) && own.converged &&
-	    own.rms_px <= config_.max_rms_px) {
-		start = own.pose;
-		first_gate = gatePx(start);
+	if (refinePose(camera_, model, uv, 4, pose, own_options, &own, cov) && own.converged) {
+		constexpr double kLoosest = 4.0; /* rival()'s slack for a pose with more LEDs */
+		if (own.rms_px > kLoosest * config_.max_rms_px &&
+		    own.chi2 > kLoosest * kLoosest * chi2Bound(4))
+			return false;
+		if (own.rms_px <= config_.max_rms_px) {
+			start = own.pose;
+			first_gate = gatePx(start);
+		}
 	}
+	++verified_;
 	Hypothesis h;
 	if (!refineMatch(start, first_gate, minLeds(false), &h))
 		return false;
@@ -1054,9 +1067,11 @@ bool Correspondence::searchQuads()
 					if (!convexOrder(xy_.data(), idx, order))
 						continue;
 					Eigen::Vector2d q[4], uv[4];
+					Eigen::Matrix2d cov[4];
 					for (int k = 0; k < 4; ++k) {
 						q[k] = xy_[order[k]];
 						uv[k] = px_[order[k]];
+						cov[k] = cov_[order[k]];
 					}
 					for (std::size_t f = 0; f < target_.faces.size(); ++f)
 						for (int dir = -1; dir <= 1; dir += 2)
@@ -1070,7 +1085,8 @@ bool Correspondence::searchQuads()
 										4;
 								if (!screenQuad(q, f, vertex))
 									continue;
-								if (tryAssignment(q, uv, f, vertex))
+								if (tryAssignment(q, uv, cov, f,
+										  vertex))
 									return true;
 							}
 				}
@@ -1093,7 +1109,13 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
 		const Pose &pose = poses[k];
 		if (!faceVisible(pose, f) || !plausible(pose))
 			continue;
-		const double gate = 2.0 * gatePx(pose);
+		/*
+		 * The normal gate: P3P fits its three points exactly, as a refined
+		 * pose does (the doubled gate is for the quadrilaterals' rough
+		 * closed form); a wider one lets a reflection near a prediction
+		 * pull the refinement off the target.
+		 */
+		const double gate = gatePx(pose);
 		Match rough;
 		if (matchPredicted(pose, gate, &rough) < minLeds(false) ||
 		    verified_ >= config_.max_verifications)

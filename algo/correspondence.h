@@ -203,7 +203,7 @@ private:
 	bool better(const Hypothesis &a, const Hypothesis &b) const;
 	bool rival(const Hypothesis &other, const Hypothesis &chosen) const;
 	bool errorExplained(const Hypothesis &hypothesis, double slack) const;
-	double chi2Bound(const Hypothesis &hypothesis) const;
+	static double chi2Bound(int points);
 	bool fitStatistical(const Hypothesis &hypothesis, double slack) const;
 	bool earlyExit(const Hypothesis &hypothesis) const;
 	bool samePose(const Pose &a, const Pose &b) const;
@@ -214,10 +214,10 @@ private:
 	void canonicalise(const Pose *reference, Hypothesis *hypothesis) const;
 	void keep(const Hypothesis &hypothesis);
 	int minLeds(bool tracking) const;
-	bool tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4], std::size_t f,
-			   const int vertex[4]);
+	bool tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4],
+			   const Eigen::Matrix2d cov[4], std::size_t f, const int vertex[4]);
 	bool verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4],
-		    const Eigen::Vector2d uv[4]);
+		    const Eigen::Vector2d uv[4], const Eigen::Matrix2d cov[4]);
 	bool tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3], std::size_t f);
 	static Pose mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t,
 			       const Eigen::Vector3d &normal_t);
