@@ -77,10 +77,11 @@ mark() {
 # heartbeats (0x306); status (0x305) and heartbeat frames with COMMAND_REJECTED (fault bit 7:
 # status byte 3, heartbeat byte 4); heartbeats saying SEARCH_ONLY and CONSTANT (byte 3: mode
 # bit 3, strobe bits 4-5); status frames saying CONSTANT (byte 0 bits 6-7); HELD: status and
-# heartbeat frames sent within 1 s (the fault hold, less candump's 2 ms) of the last command
-# frame (0x310) by loop iterations that started after it: all but the first status frame and
-# then the first heartbeat after it, which the iteration under way may still send (the host's
-# split_after in firmware_check.py). Little-endian bit numbering, as in
+# heartbeat frames sent within 1 s (the fault hold, less candump's 2 ms) of when dockposed read
+# the last command frame (0x310) by loop iterations that started after it: all but the first
+# status frame and then the first heartbeat after it, which the iteration under way may still
+# send, and the read came after those of them sent within 1 s of the command without the bit
+# (the host's split_after and t_read in firmware_check.py). Little-endian bit numbering, as in
 # firmware/protocol/dockpose.dbc. A line candump is still writing may be cut: a cut byte reads
 # as at most 15, which sets none of these bits.
 can_after() {
@@ -95,21 +96,24 @@ can_after() {
 		n = split($3, f, "#")
 		if (n < 2)
 			next
+		t = substr($1, 2, length($1) - 2) + 0
 		if (f[1] == "310") {
-			t_cmd = substr($1, 2, length($1) - 2) + 0
+			t_cmd = t_read = t
 			old = 0
 			next
 		}
 		# old: 0 nothing since the command, 1 a status (the heartbeat of its iteration may
-		# follow), 2 what the iteration under way may send is over.
+		# follow), 2 what the iteration under way may send is over. The hold counts from the
+		# read, after any frame of the iteration under way without the bit (t_read).
 		if (t_cmd && (f[1] == "305" || f[1] == "306")) {
-			if (old == 0)
-				old = f[1] == "305" ? 1 : 2
-			else if (old == 1 && f[1] == "306")
+			bit = hex(substr(f[2], f[1] == "306" ? 9 : 7, 2)) >= 128
+			if (old == 0 || (old == 1 && f[1] == "306")) {
+				old = old == 0 && f[1] == "305" ? 1 : 2
+				if (!bit && t < t_cmd + 0.998)
+					t_read = t
+			} else {
 				old = 2
-			else {
-				old = 2
-				if (substr($1, 2, length($1) - 2) + 0 < t_cmd + 0.998)
+				if (t < t_read + 0.998)
 					held++
 			}
 		}
