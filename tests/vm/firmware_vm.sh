@@ -36,7 +36,7 @@ BOARD=$REPO/board/vm/board.json
 # span at least N/10 s. On a free core this is about 12 s of dockposed.
 ALT_HB=40           # alternate phase: 40 heartbeats (>= 3.9 s) before the first command
 HOLD_HB=13          # after a corrupt command: 13 heartbeats, > the 1 s a fault bit is held
-REJECT_TRIES=4      # corrupt commands until one is seen rejected on the bus
+REJECT_TRIES=8      # corrupt commands until a later loop iteration sent a frame within the hold of one
 CONST_HB=40         # constant phase: 40 heartbeats (>= 3.9 s) ...
 CONST_REPORTS=10    # ... and 10 status frames of lit frames processed
 # --for: a cap only (the guest stops dockposed with SIGTERM when the phases are over).
