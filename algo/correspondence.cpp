@@ -378,6 +378,45 @@ int Correspondence::matchPredicted(const Pose &pose, double gate_px, Match *matc
 	return static_cast<int>(match->pairs.size());
 }
 
+/*
+ * Do at least `needed` LEDs other than own_leds, predicted by the pose on a
+ * face that faces the camera and inside the frame, each have a usable
+ * candidate other than own_candidates within gate_px? An upper bound of what
+ * matchPredicted() adds to a P3P pose's three points (two LEDs may claim one
+ * candidate here), computed only until the answer is known: the screen before
+ * a triangle's pose is verified.
+ */
+bool Correspondence::moreLedsOnCandidates(const Pose &pose, double gate_px, std::uint32_t own_leds,
+					  std::uint64_t own_candidates, int needed) const
+{
+	if (needed <= 0)
+		return true;
+	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
+	std::uint32_t front = 0;
+	for (std::size_t f = 0; f < target_.faces.size(); ++f)
+		if (normals_[f].dot(camera_t - face_centres_[f]) > 0.0)
+			front |= led_faces_mask_[f];
+	front &= ~own_leds;
+	const double gate2 = gate_px * gate_px;
+	int found = 0;
+	for (std::size_t i = 0; i < target_.points_mm.size(); ++i) {
+		if (!(front & (1u << i)))
+			continue;
+		Eigen::Vector2d uv;
+		if (!camera_.project(pose.apply(target_.points_mm[i]), &uv) ||
+		    !camera_.inImage(uv, -gate_px))
+			continue;
+		for (std::size_t j = 0; j < px_.size(); ++j)
+			if (usable_[j] && !(own_candidates & (std::uint64_t{ 1 } << j)) &&
+			    (px_[j] - uv).squaredNorm() < gate2) {
+				if (++found >= needed)
+					return true;
+				break;
+			}
+	}
+	return false;
+}
+
 /* Refine over the hypothesis's current matches (the covariance only when asked for). */
 bool Correspondence::refineMatched(const Pose &initial, Hypothesis *h, bool covariance) const
 {
@@ -1100,7 +1139,8 @@ bool Correspondence::searchQuads()
  * before it is verified. True: stop the search.
  */
 bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3],
-				 std::size_t f)
+				 std::size_t f, std::uint32_t own_leds,
+				 std::uint64_t own_candidates)
 {
 	++hypotheses_;
 	Pose poses[4];
@@ -1116,8 +1156,8 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
 		 * pull the refinement off the target.
 		 */
 		const double gate = gatePx(pose);
-		Match rough;
-		if (matchPredicted(pose, gate, &rough) < minLeds(false) ||
+		if (!moreLedsOnCandidates(pose, gate, own_leds, own_candidates,
+					  minLeds(false) - 3) ||
 		    verified_ >= config_.max_verifications)
 			continue;
 		++verified_;
@@ -1218,6 +1258,15 @@ bool Correspondence::searchTriangles()
 									     plane[vertex[0]]) <
 							      0.0))
 								continue;
+							std::uint32_t leds = 0;
+							for (int k = 0; k < 3; ++k)
+								leds |= 1u
+									<< target_.faces[f]
+											[vertex[k]];
+							const std::uint64_t cands =
+								(std::uint64_t{ 1 } << ti[0]) |
+								(std::uint64_t{ 1 } << ti[1]) |
+								(std::uint64_t{ 1 } << ti[2]);
 							for (int rot = 0; rot < 3; ++rot) {
 								Eigen::Vector3d model[3];
 								Eigen::Vector2d q[3];
@@ -1229,7 +1278,8 @@ bool Correspondence::searchTriangles()
 												 [vertex[k]]];
 									q[k] = t[(k + rot) % 3];
 								}
-								if (tryTriangle(model, q, f))
+								if (tryTriangle(model, q, f, leds,
+										cands))
 									return true;
 							}
 						}

@@ -218,7 +218,10 @@ private:
 			   const Eigen::Matrix2d cov[4], std::size_t f, const int vertex[4]);
 	bool verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4],
 		    const Eigen::Vector2d uv[4], const Eigen::Matrix2d cov[4]);
-	bool tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3], std::size_t f);
+	bool tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3], std::size_t f,
+			 std::uint32_t own_leds, std::uint64_t own_candidates);
+	bool moreLedsOnCandidates(const Pose &pose, double gate_px, std::uint32_t own_leds,
+				  std::uint64_t own_candidates, int needed) const;
 	static Pose mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t,
 			       const Eigen::Vector3d &normal_t);
 	double log10Nfa(const Hypothesis &hypothesis) const;
