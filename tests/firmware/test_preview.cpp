@@ -4,7 +4,8 @@
  * published with the pipeline's findings reads back whole, the seqlock never
  * hands a reader a torn frame while the writer runs flat out, readers get
  * clear errors, the worker publishes off the caller's thread and hands the
- * frame back, and the daemon publishes at preview.rate_hz when enabled.
+ * frame back, a publish in steps is invisible until its last row, and the
+ * daemon publishes at preview.rate_hz when enabled.
  */
 #include <unistd.h>
 
@@ -241,6 +242,65 @@ TEST(Preview, TheWorkerPublishesOffTheFrameThreadAndHandsTheFrameBack)
 	EXPECT_EQ(handed, 51);
 	EXPECT_EQ(writer.published(), 51u);
 	EXPECT_FALSE(worker.drain(&back)) << "nothing left in hand after the last reclaim";
+}
+
+/* A publish in steps (the worker's, paused while the frame loop works): nothing of it reaches a
+ * reader before its last row, however long it stops between steps; then the same frame as
+ * publish() gives. */
+TEST(Preview, APublishInStepsIsInvisibleUntilItsLastRow)
+{
+	const std::string data = DOCKPOSE_TEST_DATA;
+	const TargetModel target = loadTargetModel(data + "/wedge.json").value();
+	const CameraIntrinsics camera = loadCameraIntrinsics(data + "/cam512.json").value();
+	FrameRenderer renderer(target, camera);
+	Image image;
+	renderer.render(poseAt(camera, target, 600.0, { 5.0, 10.0, -3.0 }), RenderOptions{}, 3,
+			&image);
+	Pipeline pipeline(target, camera);
+	const PoseResult &result = pipeline.process(image.view());
+	ASSERT_TRUE(result.found) << poseStatusName(result.status);
+	PreviewSnapshot snapshot;
+	previewSnapshot(&snapshot, 41, 42, image.width(), image.height(), pipeline, &result,
+			{ 2, 0 });
+
+	const std::string name = uniqueName("steps");
+	PreviewWriter writer;
+	ASSERT_TRUE(writer.open(name, camera.width, camera.height, 256).isOk());
+	PreviewReader reader;
+	ASSERT_TRUE(reader.open(name).isOk());
+	const int rows = writer.rowsPerBlock();
+	EXPECT_GE(rows, 1);
+	EXPECT_LT(rows, writer.height()) << "a step is part of the frame";
+
+	writer.publish(image.view(), 40, 0, pipeline, &result, { 2, 0 }); /* the frame before */
+	auto got = std::make_unique<PreviewFrame>();
+	ASSERT_EQ(reader.latest(got.get()), 1u);
+	EXPECT_FALSE(writer.beginPublish(snapshot, ImageView{}, target, pipeline.camera()))
+		<< "no image: nothing begun";
+	ASSERT_TRUE(writer.beginPublish(snapshot, image.view(), target, pipeline.camera()));
+	int steps = 0;
+	for (bool done = false; !done; ++steps) {
+		/* Between steps: the frame before is still the latest, whole. */
+		EXPECT_EQ(writer.published(), 1u);
+		ASSERT_EQ(reader.latest(got.get()), 1u);
+		EXPECT_EQ(got->frame_counter, 40u);
+		done = writer.publishRows(rows);
+	}
+	EXPECT_EQ(steps, (writer.height() + rows - 1) / rows);
+	ASSERT_EQ(reader.latest(got.get(), 1), 2u);
+	EXPECT_EQ(got->frame_counter, 41u);
+	EXPECT_EQ(got->timestamp_ns, 42);
+
+	/* The same pixels and findings as publish() in one go. */
+	writer.publish(image.view(), 41, 42, pipeline, &result, { 2, 0 });
+	auto want = std::make_unique<PreviewFrame>();
+	ASSERT_EQ(reader.latest(want.get(), 2), 3u);
+	EXPECT_TRUE(std::equal(want->pixels,
+			       want->pixels + static_cast<std::size_t>(want->width) * want->height,
+			       got->pixels));
+	EXPECT_EQ(got->led_count, want->led_count);
+	for (std::uint32_t i = 0; i < got->led_count; ++i)
+		EXPECT_EQ(got->leds[i].matched, want->leds[i].matched);
 }
 
 /* The writer flat out, each frame's pixels all equal to its counter's low byte: every frame
