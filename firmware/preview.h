@@ -225,7 +225,11 @@ public:
 	bool beginPublish(const PreviewSnapshot &snapshot, const ImageView &image,
 			  const TargetModel &target, const CameraModel &camera);
 	bool publishRows(int rows);
-	/* Preview rows per publishRows() step that read about kPreviewBlockPixels frame pixels. */
+	/*
+	 * Preview rows per publishRows() step that read about
+	 * kPreviewBlockPixels frame pixels (at least 1). Allocates: never. The
+	 * writer's thread, after open().
+	 */
 	int rowsPerBlock() const;
 
 	std::uint64_t published() const;

@@ -96,7 +96,7 @@ public:
 	/*
 	 * Finish the frame in hand (it stays to be reclaimed) and join the
 	 * thread: marks the loop idle (the caller waits, within a poll period
-	 * and the rest of one downscale). Idempotent.
+	 * and the rest of one downscale). Idempotent. Allocates: never.
 	 */
 	void stop();
 	bool running() const { return thread_.joinable(); }
@@ -111,7 +111,10 @@ public:
 	 */
 	bool submit(const hal::Frame &frame, const Pipeline &pipeline, const PoseResult *result,
 		    PreviewStatus status);
-	/* True, with *frame: a handed-over frame the worker is done with, to release. Never waits. */
+	/*
+	 * True, with *frame: a handed-over frame the worker is done with, to
+	 * release. Never waits, no system call. Allocates: never.
+	 */
 	bool reclaim(hal::Frame *frame);
 	/*
 	 * Wait until the worker is done with its frame (marking the loop idle:
@@ -129,6 +132,7 @@ public:
 	 */
 	void setLoopBusy(bool busy) { loop_busy_.store(busy, std::memory_order_relaxed); }
 
+	/* The counts below: relaxed loads, any thread, never allocate. */
 	/* Preview frames skipped because the worker was busy. Any thread. */
 	std::uint64_t skipped() const { return skipped_.load(std::memory_order_relaxed); }
 	/* Preview frames handed to the worker. Any thread. */
