@@ -195,7 +195,12 @@ int Daemon::run(const std::atomic<bool> &stop_requested, double run_for_s)
 
 		hal::Frame frame;
 		const std::int64_t wait_start_ns = now_ns;
+		/* Idle from here until a frame comes: the preview worker's time for its pixel work
+		 * (firmware/preview_worker.h). Busy again from the frame to the next wait. */
+		preview_worker_.setLoopBusy(false);
 		const hal::WaitResult result = backends_.camera->waitFrame(&frame, kWaitSliceMs);
+		if (result == hal::WaitResult::Frame)
+			preview_worker_.setLoopBusy(true);
 		now_ns = hal::monotonicNs();
 		if (result == hal::WaitResult::Frame) {
 			frame_held_ = false;
@@ -329,7 +334,8 @@ void Daemon::handleFrame(const hal::Frame &frame, std::int64_t now_ns)
 	reportFrame(frame, result);
 
 	/* Every Nth frame to the operator preview (after the report: it never delays one). The
-	 * worker downscales it on its own thread, holding the frame; busy, the frame is skipped. */
+	 * worker downscales it on its own thread, holding the frame, while run() waits for the next
+	 * frame; still busy with the last one, this preview frame is skipped. */
 	if (preview_on_ && preview_.isOpen() && ++preview_count_ >= preview_every_) {
 		preview_count_ = 0;
 		const PreviewStatus status{ static_cast<std::uint8_t>(state_machine_.state()),

@@ -186,13 +186,49 @@ void PreviewWriter::publish(const ImageView &image, std::uint64_t frame_counter,
 void PreviewWriter::publish(const PreviewSnapshot &snapshot, const ImageView &image,
 			    const TargetModel &target, const CameraModel &camera)
 {
-	if (!accepts(image))
+	if (!beginPublish(snapshot, image, target, camera))
 		return;
+	(void)publishRows(height_); /* every row in one step: published */
+}
+
+bool PreviewWriter::beginPublish(const PreviewSnapshot &snapshot, const ImageView &image,
+				 const TargetModel &target, const CameraModel &camera)
+{
+	if (!accepts(image))
+		return false;
 	PreviewFrame &f = beginSlot();
 	describe(&f, snapshot, target, camera);
-	f.published_ns = hal::monotonicNs();
-	downscaleBox(image, factor_, f.pixels, width_, height_);
-	endSlot(f);
+	slot_ = &f;
+	image_ = image;
+	next_row_ = 0;
+	return true;
+}
+
+bool PreviewWriter::publishRows(int rows)
+{
+	if (!slot_)
+		return true;
+	const int y0 = next_row_;
+	const int n = std::clamp(rows, 1, height_ - y0);
+	/* The band of frame rows that makes preview rows [y0, y0 + n). */
+	const ImageView band{ image_.row(y0 * factor_), image_.width, n * factor_,
+			      image_.stride_bytes };
+	downscaleBox(band, factor_, slot_->pixels + static_cast<std::ptrdiff_t>(y0) * width_,
+		     width_, n);
+	next_row_ = y0 + n;
+	if (next_row_ < height_)
+		return false;
+	slot_->published_ns = hal::monotonicNs();
+	endSlot(*slot_);
+	slot_ = nullptr;
+	image_ = ImageView{};
+	return true;
+}
+
+int PreviewWriter::rowsPerBlock() const
+{
+	const int per_row = std::max(1, factor_ * factor_ * width_);
+	return std::max(1, kPreviewBlockPixels / per_row);
 }
 
 bool PreviewWriter::accepts(const ImageView &image) const

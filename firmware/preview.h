@@ -42,6 +42,12 @@ constexpr int kMaxPreviewWidth = 640;
 constexpr int kMaxPreviewHeight = 512;
 constexpr std::size_t kMaxPreviewPixels =
 	static_cast<std::size_t>(kMaxPreviewWidth) * kMaxPreviewHeight;
+/*
+ * The frame pixels a staged publish step reads (PreviewWriter::publishRows()):
+ * about 16 KB, a few µs of downscale, the most a PreviewWorker step runs on
+ * after the frame loop turns busy (640x480 at 320 px: 12 preview rows).
+ */
+constexpr int kPreviewBlockPixels = 16384;
 
 static_assert(std::atomic<std::uint64_t>::is_always_lock_free,
 	      "the seqlock needs a lock-free 64-bit atomic in shared memory");
@@ -202,6 +208,30 @@ public:
 	void publish(const PreviewSnapshot &snapshot, const ImageView &image,
 		     const TargetModel &target, const CameraModel &camera);
 
+	/*
+	 * The same publish in steps, for a writer that stops between them (the
+	 * PreviewWorker does its pixel work only while the frame loop is idle).
+	 * beginPublish() takes the next slot, projects the LEDs and describes
+	 * the snapshot into it (as publish()); publishRows() downscales the next
+	 * `rows` preview rows (at least one) of `image`, which must stay valid
+	 * and unchanged until the last row is done; it returns true when that
+	 * was the last row and the frame is published (counted, visible to
+	 * readers). Until then the slot is invisible: readers copy the newest
+	 * published slot, never the one being written, so a writer paused
+	 * between steps for any time tears nothing. beginPublish() false: the
+	 * image is not of the ring's size, nothing begun. Allocates: never. The
+	 * one writer thread, never interleaved with another publish().
+	 */
+	bool beginPublish(const PreviewSnapshot &snapshot, const ImageView &image,
+			  const TargetModel &target, const CameraModel &camera);
+	bool publishRows(int rows);
+	/*
+	 * Preview rows per publishRows() step that read about
+	 * kPreviewBlockPixels frame pixels (at least 1). Allocates: never. The
+	 * writer's thread, after open().
+	 */
+	int rowsPerBlock() const;
+
 	std::uint64_t published() const;
 
 private:
@@ -217,6 +247,10 @@ private:
 	std::string shm_name_;
 	int factor_ = 1;
 	int width_ = 0, height_ = 0;
+	/* The publish under way (beginPublish() to the last publishRows()). */
+	PreviewFrame *slot_ = nullptr;
+	ImageView image_;
+	int next_row_ = 0; /* the next preview row to downscale */
 };
 
 class PreviewReader

@@ -8,6 +8,17 @@
 
 namespace dockpose::firmware {
 
+namespace {
+
+void nap(std::int64_t ns)
+{
+	const timespec t{ static_cast<time_t>(ns / 1'000'000'000),
+			  static_cast<long>(ns % 1'000'000'000) };
+	(void)clock_nanosleep(CLOCK_MONOTONIC, 0, &t, nullptr);
+}
+
+} /* namespace */
+
 PreviewWorker::~PreviewWorker()
 {
 	stop();
@@ -31,6 +42,8 @@ void PreviewWorker::stop()
 {
 	if (!running())
 		return;
+	/* The caller waits for the join: the loop is idle, and the frame in hand is finished. */
+	setLoopBusy(false);
 	stopping_.store(true, std::memory_order_release);
 	thread_.join(); /* within a poll period (and the frame in hand, if any) */
 }
@@ -62,6 +75,8 @@ bool PreviewWorker::reclaim(hal::Frame *frame)
 
 bool PreviewWorker::drain(hal::Frame *frame)
 {
+	/* The caller waits here: the loop is idle, and the worker may finish. */
+	setLoopBusy(false);
 	for (;;) {
 		const std::uint32_t s = state_.load(std::memory_order_acquire);
 		if (s == Idle)
@@ -83,16 +98,41 @@ void PreviewWorker::loop()
 		if (state_.load(std::memory_order_acquire) == Pending) {
 			/* Only this thread moves the state on from Pending. */
 			state_.store(Working, std::memory_order_relaxed);
-			writer_->publish(snapshot_, frame_.image, target_, *camera_);
+			work();
 			state_.store(Done, std::memory_order_release);
 			state_.notify_one(); /* drain() may wait for it */
 			continue;
 		}
 		if (stopping_.load(std::memory_order_acquire))
 			return;
-		const timespec poll{ 0, kPreviewPollNs };
-		(void)clock_nanosleep(CLOCK_MONOTONIC, 0, &poll, nullptr);
+		nap(kPreviewPollNs);
 	}
+}
+
+void PreviewWorker::work()
+{
+	/* Every step reads the frame or writes the ring: none while the frame loop works. */
+	if (waitForIdle())
+		deferred_.fetch_add(1, std::memory_order_relaxed);
+	if (!writer_->beginPublish(snapshot_, frame_.image, target_, *camera_))
+		return;
+	const int rows = writer_->rowsPerBlock();
+	for (;;) {
+		if (waitForIdle())
+			paused_.fetch_add(1, std::memory_order_relaxed);
+		if (writer_->publishRows(rows))
+			return;
+	}
+}
+
+bool PreviewWorker::waitForIdle()
+{
+	if (!loop_busy_.load(std::memory_order_relaxed))
+		return false;
+	do
+		nap(kPreviewPollNs);
+	while (loop_busy_.load(std::memory_order_relaxed));
+	return true;
 }
 
 } /* namespace dockpose::firmware */

@@ -4,7 +4,9 @@
  * published with the pipeline's findings reads back whole, the seqlock never
  * hands a reader a torn frame while the writer runs flat out, readers get
  * clear errors, the worker publishes off the caller's thread and hands the
- * frame back, and the daemon publishes at preview.rate_hz when enabled.
+ * frame back, only while the frame loop is idle (a publish in steps is
+ * invisible until its last row), and the daemon publishes at
+ * preview.rate_hz when enabled.
  */
 #include <unistd.h>
 
@@ -241,6 +243,141 @@ TEST(Preview, TheWorkerPublishesOffTheFrameThreadAndHandsTheFrameBack)
 	EXPECT_EQ(handed, 51);
 	EXPECT_EQ(writer.published(), 51u);
 	EXPECT_FALSE(worker.drain(&back)) << "nothing left in hand after the last reclaim";
+}
+
+/* A publish in steps (the worker's, paused while the frame loop works): nothing of it reaches a
+ * reader before its last row, however long it stops between steps; then the same frame as
+ * publish() gives. */
+TEST(Preview, APublishInStepsIsInvisibleUntilItsLastRow)
+{
+	const std::string data = DOCKPOSE_TEST_DATA;
+	const TargetModel target = loadTargetModel(data + "/wedge.json").value();
+	const CameraIntrinsics camera = loadCameraIntrinsics(data + "/cam512.json").value();
+	FrameRenderer renderer(target, camera);
+	Image image;
+	renderer.render(poseAt(camera, target, 600.0, { 5.0, 10.0, -3.0 }), RenderOptions{}, 3,
+			&image);
+	Pipeline pipeline(target, camera);
+	const PoseResult &result = pipeline.process(image.view());
+	ASSERT_TRUE(result.found) << poseStatusName(result.status);
+	PreviewSnapshot snapshot;
+	previewSnapshot(&snapshot, 41, 42, image.width(), image.height(), pipeline, &result,
+			{ 2, 0 });
+
+	const std::string name = uniqueName("steps");
+	PreviewWriter writer;
+	ASSERT_TRUE(writer.open(name, camera.width, camera.height, 256).isOk());
+	PreviewReader reader;
+	ASSERT_TRUE(reader.open(name).isOk());
+	const int rows = writer.rowsPerBlock();
+	EXPECT_GE(rows, 1);
+	EXPECT_LT(rows, writer.height()) << "a step is part of the frame";
+
+	writer.publish(image.view(), 40, 0, pipeline, &result, { 2, 0 }); /* the frame before */
+	auto got = std::make_unique<PreviewFrame>();
+	ASSERT_EQ(reader.latest(got.get()), 1u);
+	EXPECT_FALSE(writer.beginPublish(snapshot, ImageView{}, target, pipeline.camera()))
+		<< "no image: nothing begun";
+	ASSERT_TRUE(writer.beginPublish(snapshot, image.view(), target, pipeline.camera()));
+	int steps = 0;
+	for (bool done = false; !done; ++steps) {
+		/* Between steps: the frame before is still the latest, whole. */
+		EXPECT_EQ(writer.published(), 1u);
+		ASSERT_EQ(reader.latest(got.get()), 1u);
+		EXPECT_EQ(got->frame_counter, 40u);
+		done = writer.publishRows(rows);
+	}
+	EXPECT_EQ(steps, (writer.height() + rows - 1) / rows);
+	ASSERT_EQ(reader.latest(got.get(), 1), 2u);
+	EXPECT_EQ(got->frame_counter, 41u);
+	EXPECT_EQ(got->timestamp_ns, 42);
+
+	/* The same pixels and findings as publish() in one go. */
+	writer.publish(image.view(), 41, 42, pipeline, &result, { 2, 0 });
+	auto want = std::make_unique<PreviewFrame>();
+	ASSERT_EQ(reader.latest(want.get(), 2), 3u);
+	EXPECT_TRUE(std::equal(want->pixels,
+			       want->pixels + static_cast<std::size_t>(want->width) * want->height,
+			       got->pixels));
+	EXPECT_EQ(got->led_count, want->led_count);
+	for (std::uint32_t i = 0; i < got->led_count; ++i)
+		EXPECT_EQ(got->leds[i].matched, want->leds[i].matched);
+}
+
+/* The worker does its pixel work only while the frame loop is idle: a frame handed over while
+ * the loop is busy is not published, however long the loop stays busy, and comes out once the
+ * loop goes idle; drain() (the frame thread waiting) lets it finish. Behaviour, not timing: the
+ * waits are bounded only to fail rather than hang. */
+TEST(Preview, TheWorkerPublishesOnlyWhileTheFrameLoopIsIdle)
+{
+	const std::string data = DOCKPOSE_TEST_DATA;
+	const TargetModel target = loadTargetModel(data + "/wedge.json").value();
+	const CameraIntrinsics camera = loadCameraIntrinsics(data + "/cam512.json").value();
+	FrameRenderer renderer(target, camera);
+	Image image;
+	renderer.render(poseAt(camera, target, 600.0, { 5.0, 10.0, -3.0 }), RenderOptions{}, 3,
+			&image);
+	Pipeline pipeline(target, camera);
+	const PoseResult &result = pipeline.process(image.view());
+	ASSERT_TRUE(result.found) << poseStatusName(result.status);
+
+	const std::string name = uniqueName("idle");
+	PreviewWriter writer;
+	ASSERT_TRUE(writer.open(name, camera.width, camera.height, 256).isOk());
+	PreviewReader reader;
+	ASSERT_TRUE(reader.open(name).isOk());
+	PreviewWorker worker;
+	ASSERT_TRUE(worker.start(&writer, pipeline).isOk());
+	hal::Frame frame;
+	frame.image = image.view();
+	frame.slot = 1;
+	hal::Frame back;
+	/* done() true once (it may consume: reclaim()), or false after a minute. */
+	const auto eventually = [](auto done) {
+		const auto give_up = std::chrono::steady_clock::now() + 60s;
+		for (;;) {
+			if (done())
+				return true;
+			if (std::chrono::steady_clock::now() >= give_up)
+				return false;
+			std::this_thread::sleep_for(1ms);
+		}
+	};
+
+	/* Busy: handed over and taken up, but nothing published and nothing to reclaim. */
+	worker.setLoopBusy(true);
+	frame.sequence = 10;
+	ASSERT_TRUE(worker.submit(frame, pipeline, &result, {}));
+	ASSERT_TRUE(eventually([&] { return !worker.pending(); })) << "the worker never polled";
+	for (int poll = 0; poll < 10; ++poll) {
+		std::this_thread::sleep_for(std::chrono::nanoseconds(kPreviewPollNs));
+		EXPECT_EQ(writer.published(), 0u) << "published while the loop was busy";
+		EXPECT_FALSE(worker.reclaim(&back)) << "done while the loop was busy";
+	}
+	EXPECT_FALSE(worker.submit(frame, pipeline, &result, {})) << "still in hand: skipped";
+
+	/* Idle: it comes out, and the frame comes back. */
+	worker.setLoopBusy(false);
+	ASSERT_TRUE(eventually([&] { return worker.reclaim(&back); })) << "never published";
+	EXPECT_EQ(back.sequence, 10u);
+	EXPECT_EQ(back.slot, 1);
+	EXPECT_EQ(writer.published(), 1u);
+	auto got = std::make_unique<PreviewFrame>();
+	ASSERT_EQ(reader.latest(got.get()), 1u);
+	EXPECT_EQ(got->frame_counter, 10u);
+	EXPECT_EQ(got->found, 1);
+
+	/* Busy again, then the frame thread drains (as before the camera stops): drain() marks
+	 * the loop idle (its caller waits) and the frame is finished and given back. */
+	worker.setLoopBusy(true);
+	frame.sequence = 11;
+	ASSERT_TRUE(worker.submit(frame, pipeline, &result, {}));
+	ASSERT_TRUE(worker.drain(&back));
+	EXPECT_EQ(back.sequence, 11u);
+	EXPECT_EQ(writer.published(), 2u);
+	worker.stop();
+	EXPECT_EQ(worker.handed(), 2u);
+	EXPECT_EQ(worker.skipped(), 1u);
 }
 
 /* The writer flat out, each frame's pixels all equal to its counter's low byte: every frame
