@@ -1259,10 +1259,8 @@ bool Correspondence::searchTriangles()
 							      0.0))
 								continue;
 							std::uint32_t leds = 0;
-							for (int k = 0; k < 3; ++k)
-								leds |= 1u
-									<< target_.faces[f]
-											[vertex[k]];
+							for (const int v : vertex)
+								leds |= 1u << target_.faces[f][v];
 							const std::uint64_t cands =
 								(std::uint64_t{ 1 } << ti[0]) |
 								(std::uint64_t{ 1 } << ti[1]) |
