@@ -40,6 +40,26 @@ std::string uniqueName(const char *what)
 	return std::string("dockpose-test-") + what + "-" + std::to_string(getpid());
 }
 
+/* The wedge at 600 mm on the 512 px camera, noise-free, solved: the worker tests' frame. */
+struct WedgeScene {
+	WedgeScene()
+		: target(loadTargetModel(std::string(DOCKPOSE_TEST_DATA) + "/wedge.json").value()),
+		  camera(loadCameraIntrinsics(std::string(DOCKPOSE_TEST_DATA) + "/cam512.json")
+				 .value()),
+		  pipeline(target, camera)
+	{
+		FrameRenderer renderer(target, camera);
+		renderer.render(poseAt(camera, target, 600.0, { 5.0, 10.0, -3.0 }), RenderOptions{},
+				3, &image);
+		result = &pipeline.process(image.view());
+	}
+	TargetModel target;
+	CameraIntrinsics camera;
+	Image image;
+	Pipeline pipeline;
+	const PoseResult *result = nullptr;
+};
+
 TEST(Preview, FactorAndBoxDownscale)
 {
 	EXPECT_EQ(previewFactor(640, 320), 2);
@@ -163,15 +183,11 @@ TEST(Preview, APublishedFrameReadsBackWithThePipelinesFindings)
  * publish() gives, and handed back; while it holds one, the next is skipped and counted. */
 TEST(Preview, TheWorkerPublishesOffTheFrameThreadAndHandsTheFrameBack)
 {
-	const std::string data = DOCKPOSE_TEST_DATA;
-	const TargetModel target = loadTargetModel(data + "/wedge.json").value();
-	const CameraIntrinsics camera = loadCameraIntrinsics(data + "/cam512.json").value();
-	FrameRenderer renderer(target, camera);
-	Image image;
-	renderer.render(poseAt(camera, target, 600.0, { 5.0, 10.0, -3.0 }), RenderOptions{}, 3,
-			&image);
-	Pipeline pipeline(target, camera);
-	const PoseResult &result = pipeline.process(image.view());
+	WedgeScene scene;
+	const CameraIntrinsics &camera = scene.camera;
+	const Image &image = scene.image;
+	Pipeline &pipeline = scene.pipeline;
+	const PoseResult &result = *scene.result;
 	ASSERT_TRUE(result.found) << poseStatusName(result.status);
 
 	const std::string name = uniqueName("worker");
@@ -250,15 +266,12 @@ TEST(Preview, TheWorkerPublishesOffTheFrameThreadAndHandsTheFrameBack)
  * publish() gives. */
 TEST(Preview, APublishInStepsIsInvisibleUntilItsLastRow)
 {
-	const std::string data = DOCKPOSE_TEST_DATA;
-	const TargetModel target = loadTargetModel(data + "/wedge.json").value();
-	const CameraIntrinsics camera = loadCameraIntrinsics(data + "/cam512.json").value();
-	FrameRenderer renderer(target, camera);
-	Image image;
-	renderer.render(poseAt(camera, target, 600.0, { 5.0, 10.0, -3.0 }), RenderOptions{}, 3,
-			&image);
-	Pipeline pipeline(target, camera);
-	const PoseResult &result = pipeline.process(image.view());
+	WedgeScene scene;
+	const TargetModel &target = scene.target;
+	const CameraIntrinsics &camera = scene.camera;
+	const Image &image = scene.image;
+	Pipeline &pipeline = scene.pipeline;
+	const PoseResult &result = *scene.result;
 	ASSERT_TRUE(result.found) << poseStatusName(result.status);
 	PreviewSnapshot snapshot;
 	previewSnapshot(&snapshot, 41, 42, image.width(), image.height(), pipeline, &result,
@@ -310,15 +323,11 @@ TEST(Preview, APublishInStepsIsInvisibleUntilItsLastRow)
  * waits are bounded only to fail rather than hang. */
 TEST(Preview, TheWorkerPublishesOnlyWhileTheFrameLoopIsIdle)
 {
-	const std::string data = DOCKPOSE_TEST_DATA;
-	const TargetModel target = loadTargetModel(data + "/wedge.json").value();
-	const CameraIntrinsics camera = loadCameraIntrinsics(data + "/cam512.json").value();
-	FrameRenderer renderer(target, camera);
-	Image image;
-	renderer.render(poseAt(camera, target, 600.0, { 5.0, 10.0, -3.0 }), RenderOptions{}, 3,
-			&image);
-	Pipeline pipeline(target, camera);
-	const PoseResult &result = pipeline.process(image.view());
+	WedgeScene scene;
+	const CameraIntrinsics &camera = scene.camera;
+	const Image &image = scene.image;
+	Pipeline &pipeline = scene.pipeline;
+	const PoseResult &result = *scene.result;
 	ASSERT_TRUE(result.found) << poseStatusName(result.status);
 
 	const std::string name = uniqueName("idle");
