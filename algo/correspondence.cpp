@@ -287,6 +287,20 @@ bool Correspondence::plausible(const Pose &pose) const
 	       std::cos(target_.approach.max_deg * kPi / 180.0) * d.norm();
 }
 
+/*
+ * LEDs that may shine towards the camera: an LED shines only out of the
+ * faces it sits on, and one of them must face the camera (bit mask).
+ */
+std::uint32_t Correspondence::frontLeds(const Pose &pose) const
+{
+	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
+	std::uint32_t front = 0;
+	for (std::size_t f = 0; f < target_.faces.size(); ++f)
+		if (normals_[f].dot(camera_t - face_centres_[f]) > 0.0)
+			front |= led_faces_mask_[f];
+	return front;
+}
+
 /* LEDs on faces seen from the front, projecting inside the frame. */
 std::uint32_t Correspondence::predictedLeds(const Pose &pose, double margin_px) const
 {
@@ -332,12 +346,7 @@ int Correspondence::matchPredicted(const Pose &pose, double gate_px, Match *matc
 	std::array<int, kMaxLeds> choice;
 	choice.fill(-1);
 	const double gate2 = gate_px * gate_px;
-	/* An LED shines only out of the faces it sits on: one of them must face the camera. */
-	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
-	std::uint32_t front = 0;
-	for (std::size_t f = 0; f < target_.faces.size(); ++f)
-		if (normals_[f].dot(camera_t - face_centres_[f]) > 0.0)
-			front |= led_faces_mask_[f];
+	const std::uint32_t front = frontLeds(pose);
 	for (std::size_t i = 0; i < target_.points_mm.size(); ++i) {
 		Eigen::Vector2d uv;
 		if (!(front & (1u << i)))
@@ -391,12 +400,7 @@ bool Correspondence::moreLedsOnCandidates(const Pose &pose, double gate_px, std:
 {
 	if (needed <= 0)
 		return true;
-	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
-	std::uint32_t front = 0;
-	for (std::size_t f = 0; f < target_.faces.size(); ++f)
-		if (normals_[f].dot(camera_t - face_centres_[f]) > 0.0)
-			front |= led_faces_mask_[f];
-	front &= ~own_leds;
+	const std::uint32_t front = frontLeds(pose) & ~own_leds;
 	const double gate2 = gate_px * gate_px;
 	int found = 0;
 	for (std::size_t i = 0; i < target_.points_mm.size(); ++i) {

@@ -194,6 +194,7 @@ private:
 	void findSymmetries();
 	bool faceVisible(const Pose &pose, std::size_t f) const;
 	bool plausible(const Pose &pose) const;
+	std::uint32_t frontLeds(const Pose &pose) const;
 	std::uint32_t predictedLeds(const Pose &pose, double margin_px) const;
 	int matchPredicted(const Pose &pose, double gate_px, Match *match) const;
 	bool refineMatch(const Pose &initial, double first_gate_px, int min_matches,
