@@ -249,7 +249,8 @@ if [ "$mode" = virtual ]; then
 	mount --bind "$yaml_dir" "$data" || die "cannot bind-mount $yaml_dir on $data"
 	if [ -x "$lc_prefix/bin/cam" ]; then
 		rc=0
-		timeout "$TERM_WAIT_S" "$lc_prefix/bin/cam" -l >cam-list.txt 2>&1 || rc=$?
+		# (installed without an RPATH: its libcamera is the prefix's)
+		LD_LIBRARY_PATH=$lc_prefix/lib timeout "$TERM_WAIT_S" "$lc_prefix/bin/cam" -l >cam-list.txt 2>&1 || rc=$?
 		[ $rc -eq 0 ] || die "$lc_prefix/bin/cam -l failed (status $rc): $(cat cam-list.txt)"
 	fi
 fi
