@@ -75,6 +75,7 @@ STROBES = ["OFF", "CONSTANT", "ALTERNATE", "UNCHANGED"]
 MODES = ["TRACK", "SEARCH_ONLY"]
 FAULT_COMMAND_REJECTED = 0x80
 FAULT_CAN_BUS_OFF = 0x10
+FAULT_CAN_TX_OVERFLOW = 0x08
 PROBE_LATE_ID = 0x7FE
 
 
@@ -221,8 +222,34 @@ class Recording:
 		self.statuses = [f for f in self.frames if f["message"] == "DP_Status"]
 		self.beats = [f for f in self.frames if f["message"] == "DP_Heartbeat"]
 
-	def check_decoding(self):
+	def gaps_announced(self):
+		"""(alive-counter gaps, how many of them the next status frame announced with
+		CAN_TX_OVERFLOW): a frame still queued at its deadline is dropped unsent, never sent late
+		(docs/can-protocol.md), and the status frames say so."""
+		last, gaps, announced, pending = {}, 0, 0, 0
+		for _, can_id, data in read_log(self.own_log):
+			alive = data[6] & 0x0F
+			if can_id in last and (alive - last[can_id]) & 0x0F not in (0, 1):
+				gaps += ((alive - last[can_id]) & 0x0F) - 1
+				pending += ((alive - last[can_id]) & 0x0F) - 1
+			last[can_id] = alive
+			if can_id == STATUS_ID and pending:
+				if data[3] & FAULT_CAN_TX_OVERFLOW:
+					announced += pending
+				pending = 0
+		return gaps, announced
+
+	def check_decoding(self, expired_ok=False):
+		"""expired_ok: alive-counter gaps pass when each is announced by the next status frame's
+		CAN_TX_OVERFLOW (frames dropped unsent at their deadline)."""
 		c, n = self.c, self.label
+		excused = False
+		if expired_ok and self.errors["alive_gaps"]:
+			gaps, announced = self.gaps_announced()
+			excused = c.check(gaps == announced == self.errors["alive_gaps"],
+							  f"{n}: {gaps} frame(s) missing from the alive counters, each announced by the "
+							  "next status frame's CAN_TX_OVERFLOW (dropped unsent at their deadline, never "
+							  "sent late)", f"{announced} announced, candecode counts {self.errors['alive_gaps']}")
 		c.check(len(self.all) > 0 and len(self.reports) > 0, f"{n}: candump recorded dockposed's frames",
 				f"{len(self.all)} frames, {len(self.reports)} reports")
 		undecoded = [f for f in self.frames if f["message"] is None]
@@ -230,7 +257,8 @@ class Recording:
 				f"{n}: canmatrix decodes all {len(self.frames)} dockposed frames with the DBC",
 				f"{len(undecoded)} with no DBC message, e.g. id 0x{undecoded[0]['id']:x}" if undecoded else "none")
 		e = self.errors
-		c.check(self.rc == 0 and not any(e.values()),
+		left = {k: v for k, v in e.items() if not (excused and k == "alive_gaps")}
+		c.check((self.rc == 0 or excused) and not any(left.values()),
 				f"{n}: candecode --strict: CRC {e['crc']}, length {e['length']}, alive gaps {e['alive_gaps']}, "
 				f"stale {e['stale']}, malformed lines {e['malformed']}", " / ".join(self.summary))
 		# The two decoders agree frame by frame on what matters here.
@@ -905,7 +933,9 @@ def check_virtual(truth_path, count, repeat, replay_dir, virtual_dir):
 			   " ".join((pathlib.Path(virtual_dir) / "dmabuf.txt").read_text().split()))
 	except OSError:
 		pass
-	virt.check_decoding()
+	# The virtual pipeline has no frame pacing: at 80-150 reports/s the guest's vcan0 queue
+	# overflows now and then, and frames that miss their deadline are dropped unsent.
+	virt.check_decoding(expired_ok=True)
 	poses = poses_from_canmatrix(virt.frames)
 	c.check(len(poses) > 0, f"virtual: {len(poses)} valid poses from the virtual camera")
 
@@ -948,12 +978,9 @@ def check_virtual(truth_path, count, repeat, replay_dir, virtual_dir):
 			f"(frame, image, deg, mm, bar mm) {bad[:5]}")
 	c.info(f"{identical} of {compared} virtual poses bit-identical to the replay's of the same image")
 	# Against the render truth too (information: the bar above is the check).
-	worst = [0.0, 0.0]
-	for k, entries in by_image.items():
-		t = truth[k]
-		for _, p in entries:
-			worst[0] = max(worst[0], math.dist(pose_t(p), t["t_mm"]))
-	c.info(f"virtual: largest translation error against the render truth {worst[0]:.2f} mm")
+	worst = max((math.dist(pose_t(p), truth[k]["t_mm"]) for k, entries in by_image.items() for _, p in entries),
+				default=0.0)
+	c.info(f"virtual: largest translation error against the render truth {worst:.2f} mm")
 	return c
 
 
