@@ -62,7 +62,7 @@ else()
 		late-can x86_64 $<TARGET_FILE:dockposed> $<TARGET_FILE:dockpose> ${_fw_out}/x86_64-late-can)
 	_dockpose_fw_test(vm_aarch64_replay_matches_x86_64 "vm_kernel_x86_64;vm_kernel_aarch64"
 		replay $<TARGET_FILE:dockposed> ${_fw_aarch64} $<TARGET_FILE:dockpose> ${_fw_out}/replay)
-	# The virtual pipeline (libcamera >= 0.4; scripts/libcamera-build enables it) plays JPEG
+	# The virtual pipeline (in 0.5 and 0.7; scripts/libcamera-build enables it; tried on 0.7) plays JPEG
 	# files as a camera; Debian's 0.0.3 has none. Its config file lies under the libcamera's
 	# prefix, which the guest bind-mounts over.
 	if(DOCKPOSE_LIBCAMERA MATCHES "^(lc07|v0[.]7[.])" AND DOCKPOSE_LIBCAMERA_PREFIX)

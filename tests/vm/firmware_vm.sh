@@ -17,7 +17,7 @@
 #       their VMs on a replay variant of the vm board; their pose frames compared.
 #   firmware_vm.sh [--timeout S] virtual DOCKPOSED DOCKPOSE_TOOL LIBCAMERA_PREFIX OUT
 #       the real capture path on frames of the target (issue 13): the replay frames as JPEG
-#       files, played by libcamera's virtual pipeline (LIBCAMERA_PREFIX: a libcamera >= 0.4 with
+#       files, played by libcamera's virtual pipeline (LIBCAMERA_PREFIX: a libcamera with
 #       it, Raspberry Pi's 0.7 here) to DOCKPOSED (x86_64, built against that libcamera) with
 #       its libcamera backend in the x86_64 VM; the same PGM frames replayed in the same VM by
 #       the replay camera; the two runs' pose frames compared image by image.
