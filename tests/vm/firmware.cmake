@@ -11,6 +11,11 @@
 #                                       their pose frames equal within the protocol's steps
 #   vm_x86_64_dockposed_late_can        dockposed started before its CAN interface (can0)
 #                                       exists; can0 created seconds later; poses then arrive
+#   vm_x86_64_virtual_libcamera         (trees against Raspberry Pi's libcamera 0.7 only:
+#                                       DOCKPOSE_LIBCAMERA lc07) the replay frames as JPEG
+#                                       files played by libcamera's virtual pipeline to
+#                                       dockposed's libcamera backend; its poses against the
+#                                       replay camera's, image by image
 #
 # All three belong to the host build (not cross-compiling, x86_64): it has the x86_64
 # dockposed, the dockpose tool that renders the frames, and the python that decodes the CAN
@@ -57,4 +62,12 @@ else()
 		late-can x86_64 $<TARGET_FILE:dockposed> $<TARGET_FILE:dockpose> ${_fw_out}/x86_64-late-can)
 	_dockpose_fw_test(vm_aarch64_replay_matches_x86_64 "vm_kernel_x86_64;vm_kernel_aarch64"
 		replay $<TARGET_FILE:dockposed> ${_fw_aarch64} $<TARGET_FILE:dockpose> ${_fw_out}/replay)
+	# The virtual pipeline (in 0.5 and 0.7; scripts/libcamera-build enables it; tried on 0.7) plays JPEG
+	# files as a camera; Debian's 0.0.3 has none. Its config file lies under the libcamera's
+	# prefix, which the guest bind-mounts over.
+	if(DOCKPOSE_LIBCAMERA MATCHES "^(lc07|v0[.]7[.])" AND DOCKPOSE_LIBCAMERA_PREFIX)
+		_dockpose_fw_test(vm_x86_64_virtual_libcamera vm_kernel_x86_64
+			virtual $<TARGET_FILE:dockposed> $<TARGET_FILE:dockpose> ${DOCKPOSE_LIBCAMERA_PREFIX}
+			${_fw_out}/x86_64-virtual)
+	endif()
 endif()

@@ -21,6 +21,16 @@ decodings compared, and the gpio-sim samples.
   firmware_check.py late-can DIR
       check a `firmware_guest.sh late-can` recording: dockposed started without can0, said so
       once, joined can0 when it came, and its poses then arrived
+  firmware_check.py jpeg --frames DIR --quality Q -o OUT
+      the rendered frames DIR/frame_NNNN.pgm as JPEG files OUT/0.jpg, OUT/1.jpg, ... (the names
+      libcamera's virtual pipeline plays in order), with Pillow
+  firmware_check.py virtual-board --board B --camera C --target T --jpeg DIR --camera-id ID
+                                  --yaml-dir D -o OUT
+      write D/virtual.yaml (one virtual camera ID playing DIR's JPEG files at C's size) and a
+      variant of the vm board B whose libcamera camera is ID
+  firmware_check.py virtual --truth TRUTH --frames N --repeat R DIR_REPLAY DIR_VIRTUAL
+      check a `firmware_guest.sh virtual` recording (dockposed on the virtual camera) against a
+      `firmware_guest.sh replay` recording of the same frames, image by image
 
 Prints "ok: ..." and "FAILED: ..." lines; exit 0 when every check passed, 1 otherwise, 2 on
 usage errors or when a decoder cannot run.
@@ -65,6 +75,7 @@ STROBES = ["OFF", "CONSTANT", "ALTERNATE", "UNCHANGED"]
 MODES = ["TRACK", "SEARCH_ONLY"]
 FAULT_COMMAND_REJECTED = 0x80
 FAULT_CAN_BUS_OFF = 0x10
+FAULT_CAN_TX_OVERFLOW = 0x08
 PROBE_LATE_ID = 0x7FE
 
 
@@ -211,8 +222,34 @@ class Recording:
 		self.statuses = [f for f in self.frames if f["message"] == "DP_Status"]
 		self.beats = [f for f in self.frames if f["message"] == "DP_Heartbeat"]
 
-	def check_decoding(self):
+	def gaps_announced(self):
+		"""(alive-counter gaps, how many of them the next status frame announced with
+		CAN_TX_OVERFLOW): a frame still queued at its deadline is dropped unsent, never sent late
+		(docs/can-protocol.md), and the status frames say so."""
+		last, gaps, announced, pending = {}, 0, 0, 0
+		for _, can_id, data in read_log(self.own_log):
+			alive = data[6] & 0x0F
+			if can_id in last and (alive - last[can_id]) & 0x0F not in (0, 1):
+				gaps += ((alive - last[can_id]) & 0x0F) - 1
+				pending += ((alive - last[can_id]) & 0x0F) - 1
+			last[can_id] = alive
+			if can_id == STATUS_ID and pending:
+				if data[3] & FAULT_CAN_TX_OVERFLOW:
+					announced += pending
+				pending = 0
+		return gaps, announced
+
+	def check_decoding(self, expired_ok=False):
+		"""expired_ok: alive-counter gaps pass when each is announced by the next status frame's
+		CAN_TX_OVERFLOW (frames dropped unsent at their deadline)."""
 		c, n = self.c, self.label
+		excused = False
+		if expired_ok and self.errors["alive_gaps"]:
+			gaps, announced = self.gaps_announced()
+			excused = c.check(gaps == announced == self.errors["alive_gaps"],
+							  f"{n}: {gaps} frame(s) missing from the alive counters, each announced by the "
+							  "next status frame's CAN_TX_OVERFLOW (dropped unsent at their deadline, never "
+							  "sent late)", f"{announced} announced, candecode counts {self.errors['alive_gaps']}")
 		c.check(len(self.all) > 0 and len(self.reports) > 0, f"{n}: candump recorded dockposed's frames",
 				f"{len(self.all)} frames, {len(self.reports)} reports")
 		undecoded = [f for f in self.frames if f["message"] is None]
@@ -220,7 +257,8 @@ class Recording:
 				f"{n}: canmatrix decodes all {len(self.frames)} dockposed frames with the DBC",
 				f"{len(undecoded)} with no DBC message, e.g. id 0x{undecoded[0]['id']:x}" if undecoded else "none")
 		e = self.errors
-		c.check(self.rc == 0 and not any(e.values()),
+		left = {k: v for k, v in e.items() if not (excused and k == "alive_gaps")}
+		c.check((self.rc == 0 or excused) and not any(left.values()),
 				f"{n}: candecode --strict: CRC {e['crc']}, length {e['length']}, alive gaps {e['alive_gaps']}, "
 				f"stale {e['stale']}, malformed lines {e['malformed']}", " / ".join(self.summary))
 		# The two decoders agree frame by frame on what matters here.
@@ -835,6 +873,161 @@ def check_late_can(folder):
 	return c
 
 
+# --------------------------------------------------------------------------- virtual camera
+
+
+def quat_angle_deg(a, b):
+	"""The angle of the rotation between two unit quaternions (w, x, y, z), in degrees."""
+	na = math.sqrt(sum(v * v for v in a)) or 1.0
+	nb = math.sqrt(sum(v * v for v in b)) or 1.0
+	dot = abs(sum(x * y for x, y in zip(a, b))) / (na * nb)
+	return math.degrees(2.0 * math.acos(min(1.0, dot)))
+
+
+def pose_quat(p):
+	ph = p["phys"]
+	return [ph["Qw"], ph["Qx"], ph["Qy"], ph["Qz"]]
+
+
+def pose_t(p):
+	ph = p["phys"]
+	return [ph["Tx"], ph["Ty"], ph["Tz"]]
+
+
+def check_virtual(truth_path, count, repeat, replay_dir, virtual_dir):
+	"""The virtual camera's poses against the replay camera's, image by image.
+
+	libcamera's virtual pipeline (0.7: src/libcamera/pipeline/virtual/image_frame_generator.cpp)
+	shows each image `repeat` (4) times, in file order, looping, and numbers its frames from 0 at
+	each start; dockposed's FrameCounter is that number, so frame n shows image (n / repeat) %
+	count. Each pose is also matched to the render truth's nearest frame (translation), which
+	must be that image: the approach moves about 30 mm from one image to the next, far more than
+	any pose's error, so a wrong mapping cannot pass. The accuracy bar (README): rotation within
+	2 degrees, translation within max(5 mm, 2 % of the range)."""
+	c = Checks()
+	truth = [json.loads(line) for line in pathlib.Path(truth_path).read_text().splitlines() if line.strip()]
+	c.check(len(truth) == count, f"render truth has {count} frames", f"{len(truth)}")
+
+	rep = Recording(c, replay_dir, "replay")
+	log = rep.dockposed_log()
+	rep.check_no_hang()
+	c.check(rep.dockposed_rc() == 0 and "the camera has no more frames" in log,
+			"replay: dockposed played every frame and exited 0", f"status {rep.dockposed_rc()}; stderr:\n{log}")
+	rep.check_decoding()
+	replay = poses_from_canmatrix(rep.frames)
+	c.check(len(replay) >= math.ceil(0.9 * count), f"replay: valid poses for {len(replay)} of {count} frames (>= 90 %)",
+			f"frames {sorted(replay)}")
+
+	virt = Recording(c, virtual_dir, "virtual")
+	vlog = virt.dockposed_log()
+	virt.check_no_hang()
+	c.check(virt.dockposed_rc() == 0, "virtual: dockposed stopped by SIGTERM exited 0",
+			f"status {virt.dockposed_rc()}; stderr:\n{vlog}")
+	m = re.search(r"^dockposed: board .*$", vlog, re.M)
+	if m:
+		c.info(m.group(0))
+	for m in re.finditer(r"^dockposed: ([\d.]+) s: (\d+) frames .*$", vlog, re.M):
+		c.info(m.group(0))
+	try:
+		c.info("virtual: dma-buf providers in the guest: " +
+			   " ".join((pathlib.Path(virtual_dir) / "dmabuf.txt").read_text().split()))
+	except OSError:
+		pass
+	# The virtual pipeline has no frame pacing: at 80-150 reports/s the guest's vcan0 queue
+	# overflows now and then, and frames that miss their deadline are dropped unsent.
+	virt.check_decoding(expired_ok=True)
+	poses = poses_from_canmatrix(virt.frames)
+	c.check(len(poses) > 0, f"virtual: {len(poses)} valid poses from the virtual camera")
+
+	def nearest(t):
+		return min(range(len(truth)), key=lambda k: sum((a - b) ** 2 for a, b in zip(t, truth[k]["t_mm"])))
+
+	wrong = [(n, (n // repeat) % count, nearest(pose_t(p))) for n, p in poses.items()
+			 if nearest(pose_t(p)) != (n // repeat) % count]
+	c.check(not wrong, f"virtual: every pose is nearest the truth of the image its frame counter says "
+					   f"(frame n shows image (n / {repeat}) % {count})",
+			f"{len(wrong)} not, (frame, image, nearest) e.g. {wrong[:5]}")
+
+	by_image = {}
+	for n, p in poses.items():
+		by_image.setdefault((n // repeat) % count, []).append((n, p))
+	common = sorted(set(by_image) & set(replay))
+	c.check(len(common) >= math.ceil(0.9 * count),
+			f"{len(common)} of {count} images have poses from both cameras (>= 90 %)",
+			f"virtual images {sorted(by_image)}, replay frames {sorted(replay)}")
+	worst_rot, worst_t, worst_ratio, compared, bad = 0.0, 0.0, 0.0, 0, []
+	identical = 0
+	for k in common:
+		r = replay[k]
+		rng = math.sqrt(sum(v * v for v in truth[k]["t_mm"]))
+		bar_t = max(5.0, 0.02 * rng)
+		for n, p in by_image[k]:
+			rot = quat_angle_deg(pose_quat(p), pose_quat(r))
+			dt = math.dist(pose_t(p), pose_t(r))
+			compared += 1
+			identical += p["raw"] == r["raw"]
+			worst_rot = max(worst_rot, rot)
+			worst_t = max(worst_t, dt)
+			worst_ratio = max(worst_ratio, dt / bar_t)
+			if rot > 2.0 or dt > bar_t:
+				bad.append((n, k, round(rot, 3), round(dt, 2), round(bar_t, 1)))
+	c.check(compared > 0 and not bad,
+			f"virtual and replay agree within the accuracy bar (rotation <= 2 deg, translation <= max(5 mm, "
+			f"2 % of range)) in all {compared} poses of {len(common)} images: largest rotation difference "
+			f"{worst_rot:.3f} deg, translation {worst_t:.2f} mm ({100 * worst_ratio:.0f} % of its bar)",
+			f"(frame, image, deg, mm, bar mm) {bad[:5]}")
+	c.info(f"{identical} of {compared} virtual poses bit-identical to the replay's of the same image")
+	# Against the render truth too (information: the bar above is the check).
+	worst = max((math.dist(pose_t(p), truth[k]["t_mm"]) for k, entries in by_image.items() for _, p in entries),
+				default=0.0)
+	c.info(f"virtual: largest translation error against the render truth {worst:.2f} mm")
+	return c
+
+
+def write_jpeg(args):
+	from PIL import Image  # python3-pil (scripts/setup); only this subcommand needs it
+
+	frames = sorted(pathlib.Path(args.frames).glob("frame_*.pgm"))
+	if not frames:
+		raise Fatal(f"no frame_*.pgm in {args.frames}")
+	out = pathlib.Path(args.out)
+	out.mkdir(parents=True, exist_ok=True)
+	for i, f in enumerate(frames):
+		with Image.open(f) as im:
+			if im.mode != "L":
+				raise Fatal(f"{f}: mode {im.mode}, not 8-bit grey")
+			im.save(out / f"{i}.jpg", quality=args.quality)
+
+
+def write_virtual_board(args):
+	camera = json.loads(pathlib.Path(args.camera).read_text())
+	jpeg = pathlib.Path(args.jpeg).resolve()
+	ydir = pathlib.Path(args.yaml_dir)
+	ydir.mkdir(parents=True, exist_ok=True)
+	# libcamera's virtual pipeline: a folder path ends with "/", its files are played in
+	# strverscmp order (0.jpg, 1.jpg, ... 10.jpg).
+	(ydir / "virtual.yaml").write_text(
+		"%YAML 1.1\n---\n"
+		f"\"{args.camera_id}\":\n"
+		"  supported_formats:\n"
+		f"  - width: {camera['width']}\n"
+		f"    height: {camera['height']}\n"
+		"  frames:\n"
+		f"    path: \"{jpeg}/\"\n"
+		"  location: \"CameraLocationFront\"\n"
+		"  model: \"dockpose rendered approach\"\n")
+	board = json.loads(pathlib.Path(args.board).read_text())
+	cam = board["camera"]
+	cam["backend"] = "libcamera"
+	cam["id"] = args.camera_id
+	cam["width"], cam["height"] = camera["width"], camera["height"]
+	cam["intrinsics"] = str(pathlib.Path(args.camera).resolve())
+	board["pipeline"]["target"] = str(pathlib.Path(args.target).resolve())
+	# The frames show the LEDs whatever the line does: process every frame.
+	board["strobe"]["mode"] = "off"
+	pathlib.Path(args.out).write_text(json.dumps(board, indent="\t") + "\n")
+
+
 # --------------------------------------------------------------------------- replay board
 
 
@@ -882,6 +1075,24 @@ def main(argv):
 	rp.add_argument("folders", nargs=2)
 	lc = sub.add_parser("late-can")
 	lc.add_argument("folder")
+	jp = sub.add_parser("jpeg")
+	jp.add_argument("--frames", required=True)
+	jp.add_argument("--quality", type=int, required=True)
+	jp.add_argument("-o", "--out", required=True)
+	vb = sub.add_parser("virtual-board")
+	vb.add_argument("--board", required=True)
+	vb.add_argument("--camera", required=True)
+	vb.add_argument("--target", required=True)
+	vb.add_argument("--jpeg", required=True)
+	vb.add_argument("--camera-id", required=True)
+	vb.add_argument("--yaml-dir", required=True)
+	vb.add_argument("-o", "--out", required=True)
+	vc = sub.add_parser("virtual")
+	vc.add_argument("--truth", required=True)
+	vc.add_argument("--frames", type=int, required=True)
+	vc.add_argument("--repeat", type=int, required=True)
+	vc.add_argument("replay_dir")
+	vc.add_argument("virtual_dir")
 	args = p.parse_args(argv)
 
 	try:
@@ -893,8 +1104,16 @@ def main(argv):
 		if args.cmd == "replay-board":
 			write_replay_board(args)
 			return 0
+		if args.cmd == "jpeg":
+			write_jpeg(args)
+			return 0
+		if args.cmd == "virtual-board":
+			write_virtual_board(args)
+			return 0
 		if args.cmd == "board":
 			checks = check_board(args.folder)
+		elif args.cmd == "virtual":
+			checks = check_virtual(args.truth, args.frames, args.repeat, args.replay_dir, args.virtual_dir)
 		elif args.cmd == "late-can":
 			checks = check_late_can(args.folder)
 		else:

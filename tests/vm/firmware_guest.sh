@@ -24,6 +24,15 @@
 #                     mode were sent; then SIGTERM.
 #   firmware_guest.sh replay OUT DOCKPOSED BOARD MAX_S
 #       dockposed --board BOARD --for MAX_S (a replay board: it stops when the frames run out).
+#   firmware_guest.sh virtual OUT DOCKPOSED BOARD MAX_S LIBCAMERA_PREFIX YAML_DIR REPORTS
+#       dockposed --board BOARD (its libcamera camera: a camera of libcamera's virtual pipeline)
+#       until REPORTS status frames with a valid pose went out on vcan0; then SIGTERM. The
+#       virtual pipeline reads its cameras from LIBCAMERA_PREFIX/share/libcamera/pipeline/
+#       virtual/virtual.yaml only (no environment variable names another file), and the root
+#       is read-only: YAML_DIR is bind-mounted there. It needs a dma-buf provider
+#       (/dev/dma_heap/system or /dev/udmabuf: the kernel fragment's DMABUF_HEAPS_SYSTEM,
+#       UDMABUF); which ones exist goes to dmabuf.txt, and LIBCAMERA_PREFIX/bin/cam -l (when
+#       there is one) to cam-list.txt.
 #   firmware_guest.sh late-can OUT DOCKPOSED BOARD MAX_S ABSENT_S REPORTS
 #       the late CAN interface: BOARD (a looping replay board on can0) is started while can0
 #       does not exist; once dockposed's start-up is over (its stderr has the board line), it
@@ -211,8 +220,9 @@ BOARD=$4
 case $mode in
 board) [ $# -eq 12 ] || die "board: want OUT DOCKPOSED BOARD MAX_S BAD_FRAME GOOD_FRAME ALT_HB HOLD_HB TRIES CONST_HB CONST_REPORTS" ;;
 replay) [ $# -eq 5 ] || die "replay: want OUT DOCKPOSED BOARD MAX_S" ;;
+virtual) [ $# -eq 8 ] || die "virtual: want OUT DOCKPOSED BOARD MAX_S LIBCAMERA_PREFIX YAML_DIR REPORTS" ;;
 late-can) [ $# -eq 7 ] || die "late-can: want OUT DOCKPOSED BOARD MAX_S ABSENT_S REPORTS" ;;
-*) die "unknown mode '$mode' (board, replay or late-can)" ;;
+*) die "unknown mode '$mode' (board, replay, virtual or late-can)" ;;
 esac
 if [ "$mode" = late-can ] && [ -e /sys/class/net/can0 ]; then
 	die "can0 exists before the test: it must be created late"
@@ -225,7 +235,25 @@ done
 line_value=${DOCKPOSE_GPIO_SIM_DIR:?not in a dockpose VM (no DOCKPOSE_GPIO_SIM_DIR)}/sim_gpio3/value
 [ -r "$line_value" ] || die "$line_value: cannot read the gpio-sim line"
 cd "$OUT" || die "cannot cd to $OUT"
-rm -f can.log gpio.txt gpio-after.txt gpioinfo.txt cam-list.txt dockposed.out dockposed.err dockposed.rc hang.txt startup-hang.err
+rm -f can.log gpio.txt gpio-after.txt gpioinfo.txt cam-list.txt dockposed.out dockposed.err dockposed.rc hang.txt startup-hang.err dmabuf.txt
+
+if [ "$mode" = virtual ]; then
+	lc_prefix=$6 yaml_dir=$7
+	for dev in /dev/dma_heap/* /dev/udmabuf; do
+		[ -c "$dev" ] && echo "$dev" >>dmabuf.txt
+	done
+	[ -s dmabuf.txt ] || die "no dma-buf provider (/dev/dma_heap/*, /dev/udmabuf): the kernel" \
+		"lacks CONFIG_DMABUF_HEAPS_SYSTEM and CONFIG_UDMABUF"
+	data=$lc_prefix/share/libcamera/pipeline/virtual
+	[ -d "$data" ] || die "$data: no such folder (a libcamera without the virtual pipeline?)"
+	mount --bind "$yaml_dir" "$data" || die "cannot bind-mount $yaml_dir on $data"
+	if [ -x "$lc_prefix/bin/cam" ]; then
+		rc=0
+		# (installed without an RPATH: its libcamera is the prefix's)
+		LD_LIBRARY_PATH=$lc_prefix/lib timeout "$TERM_WAIT_S" "$lc_prefix/bin/cam" -l >cam-list.txt 2>&1 || rc=$?
+		[ $rc -eq 0 ] || die "$lc_prefix/bin/cam -l failed (status $rc): $(cat cam-list.txt)"
+	fi
+fi
 
 if [ "$mode" = board ]; then
 	rc=0
@@ -375,6 +403,27 @@ if [ "$mode" = board ]; then
 	fi
 	mark stop
 	stop_daemon "after the constant phase"
+fi
+
+if [ "$mode" = virtual ]; then
+	reports=$8
+	mark running
+	# Status frames (0x305) on vcan0 with PoseValid (byte 0, bit 4).
+	valid_on_vcan0() {
+		awk '$2 == "vcan0" { n = split($3, f, "#"); if (n >= 2 && f[1] == "305" &&
+			int(index("0123456789ABCDEF", toupper(substr(f[2], 1, 1))) - 1) % 2 == 1) v++ }
+			END { print v + 0 }' can.log
+	}
+	while [ "$(valid_on_vcan0)" -lt "$reports" ]; do
+		kill -0 "$daemon" 2>/dev/null || break
+		if past_deadline; then
+			hang_report "$daemon" "fewer than $reports valid poses on vcan0 $SLACK_S s past --for $5"
+			break
+		fi
+		sleep 0.3
+	done
+	mark stop
+	stop_daemon "after $reports valid poses"
 fi
 
 # Replay: dockposed stops when the frames run out (or at --for). Either mode: a dockposed

@@ -15,6 +15,12 @@
 #   firmware_vm.sh [--timeout S] replay DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT
 #       frames of the wedge target rendered with `dockpose render`, replayed by both builds in
 #       their VMs on a replay variant of the vm board; their pose frames compared.
+#   firmware_vm.sh [--timeout S] virtual DOCKPOSED DOCKPOSE_TOOL LIBCAMERA_PREFIX OUT
+#       the real capture path on frames of the target (issue 13): the replay frames as JPEG
+#       files, played by libcamera's virtual pipeline (LIBCAMERA_PREFIX: a libcamera with
+#       it, Raspberry Pi's 0.7 here) to DOCKPOSED (x86_64, built against that libcamera) with
+#       its libcamera backend in the x86_64 VM; the same PGM frames replayed in the same VM by
+#       the replay camera; the two runs' pose frames compared image by image.
 #   firmware_vm.sh [--timeout S] late-can ARCH DOCKPOSED DOCKPOSE_TOOL OUT
 #       the CAN interface comes after dockposed: the replay board, looping, on can0, started in
 #       the ARCH VM while can0 does not exist; can0 is created a few seconds later, and pose
@@ -45,6 +51,15 @@ MAX_S=${DOCKPOSE_VM_FW_MAX_S:-240}
 # camera never skips a frame, it queues them).
 REPLAY_FRAMES=30
 REPLAY_RATE_HZ=10
+# The virtual run: JPEG quality (Pillow's scale), the virtual camera's id, how many times the
+# virtual pipeline shows each image (its ImageFrameGenerator::frameRepeat, 0.7), and the valid
+# poses that end the run (the pipeline has no frame pacing: it makes frames as fast as they are
+# asked for, so dockposed sees the images in a sampled order; 300 poses leave an image unseen
+# with a chance of about 30 * (29/30)^300 = 1e-3).
+VIRTUAL_JPEG_QUALITY=95
+VIRTUAL_CAMERA_ID=dockpose-approach
+VIRTUAL_REPEAT=4
+VIRTUAL_REPORTS=300
 # The late-can run: seconds dockposed runs without can0 after its start-up, and the valid poses
 # on can0 that end it.
 LATE_ABSENT_S=4
@@ -167,6 +182,37 @@ late_can_test() {
 	"$CHECK" late-can "$out"
 }
 
+virtual_test() {
+	[[ $# -eq 4 ]] || die "virtual: want DOCKPOSED DOCKPOSE_TOOL LIBCAMERA_PREFIX OUT"
+	local x86=$1 tool=$2 prefix=$3 out=$4
+	need_dockposed x86_64 "$x86"
+	[[ -x $tool ]] || die "no dockpose tool at $tool"
+	[[ -d $prefix/share/libcamera/pipeline/virtual ]] ||
+		die "$prefix has no virtual pipeline data folder (share/libcamera/pipeline/virtual)"
+	fresh_dir "$out"
+	mkdir -p "$out/replay" "$out/virtual"
+	render_frames "$tool" "$out"
+	"$CHECK" jpeg --frames "$out/frames" --quality "$VIRTUAL_JPEG_QUALITY" -o "$out/jpeg" ||
+		die "cannot convert the frames to JPEG"
+	"$CHECK" replay-board --board "$BOARD" --camera "$REPO/board/vm/camera-replay.json" \
+		--target "$REPO/board/vm/target.json" --frames "$out/frames" --rate "$REPLAY_RATE_HZ" \
+		-o "$out/board-replay.json" || die "cannot write the replay board"
+	"$CHECK" virtual-board --board "$BOARD" --camera "$REPO/board/vm/camera-replay.json" \
+		--target "$REPO/board/vm/target.json" --jpeg "$out/jpeg" --camera-id "$VIRTUAL_CAMERA_ID" \
+		--yaml-dir "$out/virtual-yaml" -o "$out/board-virtual.json" || die "cannot write the virtual board"
+	echo "rendered $REPLAY_FRAMES frames into $out/frames, JPEG (quality $VIRTUAL_JPEG_QUALITY) in" \
+		"$out/jpeg; replay board $out/board-replay.json, virtual board $out/board-virtual.json" \
+		"(camera $VIRTUAL_CAMERA_ID, $out/virtual-yaml/virtual.yaml); the virtual run ends after" \
+		"$VIRTUAL_REPORTS valid poses"
+	local max_s=$((REPLAY_FRAMES * 20 / REPLAY_RATE_HZ + 60))
+	in_vm x86_64 "$out/replay" replay "$out/replay" "$x86" "$out/board-replay.json" "$max_s"
+	in_vm x86_64 "$out/virtual" virtual "$out/virtual" "$x86" "$out/board-virtual.json" "$MAX_S" \
+		"$prefix" "$out/virtual-yaml" "$VIRTUAL_REPORTS"
+	echo "== checks ($out)"
+	"$CHECK" virtual --truth "$out/frames/truth.jsonl" --frames "$REPLAY_FRAMES" --repeat "$VIRTUAL_REPEAT" \
+		"$out/replay" "$out/virtual"
+}
+
 replay_test() {
 	[[ $# -eq 4 ]] || die "replay: want DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT"
 	local x86=$1 arm=$2 tool=$3 out=$4
@@ -199,12 +245,13 @@ while [[ $# -gt 0 ]]; do
 	*) break ;;
 	esac
 done
-[[ $# -ge 1 ]] || die "usage: firmware_vm.sh [--timeout S] board|replay|late-can ..."
+[[ $# -ge 1 ]] || die "usage: firmware_vm.sh [--timeout S] board|replay|virtual|late-can ..."
 cmd=$1
 shift
 case $cmd in
 board) board_test "$@" ;;
 replay) replay_test "$@" ;;
 late-can) late_can_test "$@" ;;
-*) die "unknown test '$cmd' (board, replay or late-can)" ;;
+virtual) virtual_test "$@" ;;
+*) die "unknown test '$cmd' (board, replay, virtual or late-can)" ;;
 esac
