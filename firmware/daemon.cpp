@@ -34,6 +34,9 @@ constexpr int kWholeFramesAfterLightChange = 4;
 /* A command must answer one of the sensor's last this many freshness values (DP_Auth frames:
  * about 3.6 s at 60 frames/s, 25 s when only heartbeats go out). */
 constexpr std::uint64_t kCommandFreshnessWindow = 256;
+/* With a key, a DP_Command whose DP_CommandAuth has not come this long after the loop first saw
+ * it held is refused (a sender sends the two back to back: microseconds apart on the bus). */
+constexpr std::int64_t kCommandAuthWaitNs = 100'000'000;
 
 PipelineConfig pipelineConfig(const PipelineSection &section)
 {
@@ -686,25 +689,39 @@ void Daemon::handleCommands()
 	hal::CanFrame in;
 	while (backends_.can->receive(&in)) {
 		const can::Decoder::Event event = command_decoder_.feed(toRawFrame(in));
-		if (event == can::Decoder::Event::Command) {
+		if (event == can::Decoder::Event::Command)
 			applyCommand(command_decoder_.command());
-		} else if (event == can::Decoder::Event::Rejected) {
-			++stats_.commands_rejected;
-			const std::int64_t now_ns = hal::monotonicNs();
-			command_rejected_.raise(now_ns);
-			/* A flood of forged frames must not flood the journal: one line a second. */
-			++rejects_unlogged_;
-			if (now_ns - last_reject_log_ns_ >= kNsPerS) {
-				std::fprintf(log_,
-					     "dockposed: command frame 0x%03x rejected: %s (%llu "
-					     "rejected since the last such line)\n",
-					     in.id,
-					     can::frameErrorName(command_decoder_.lastError()),
-					     static_cast<unsigned long long>(rejects_unlogged_));
-				rejects_unlogged_ = 0;
-				last_reject_log_ns_ = now_ns;
-			}
-		}
+		else if (event == can::Decoder::Event::Rejected)
+			commandRejected(in.id);
+	}
+	/* A command held for its MAC frame that does not come: refused (a bare command to a
+	 * keyed sensor is flagged now, not when the next command arrives). */
+	if (!command_decoder_.commandPending()) {
+		command_pending_since_ns_ = 0;
+	} else if (const std::int64_t now_ns = hal::monotonicNs(); command_pending_since_ns_ == 0) {
+		command_pending_since_ns_ = now_ns;
+	} else if (now_ns - command_pending_since_ns_ >= kCommandAuthWaitNs) {
+		command_pending_since_ns_ = 0;
+		if (command_decoder_.dropPendingCommand() == can::Decoder::Event::Rejected)
+			commandRejected(config_.can.base_id + can::kCommand);
+	}
+}
+
+void Daemon::commandRejected(std::uint32_t can_id)
+{
+	++stats_.commands_rejected;
+	const std::int64_t now_ns = hal::monotonicNs();
+	command_rejected_.raise(now_ns);
+	/* A flood of forged frames must not flood the journal: one line a second. */
+	++rejects_unlogged_;
+	if (now_ns - last_reject_log_ns_ >= kNsPerS) {
+		std::fprintf(log_,
+			     "dockposed: command frame 0x%03x rejected: %s (%llu "
+			     "rejected since the last such line)\n",
+			     can_id, can::frameErrorName(command_decoder_.lastError()),
+			     static_cast<unsigned long long>(rejects_unlogged_));
+		rejects_unlogged_ = 0;
+		last_reject_log_ns_ = now_ns;
 	}
 }
 

@@ -126,6 +126,8 @@ private:
 	void handleStall(std::int64_t now_ns);
 	hal::Status startAuthentication();
 	void handleCommands();
+	/* A refused command frame: counted, COMMAND_REJECTED raised, logged (at most once a second). */
+	void commandRejected(std::uint32_t can_id);
 	void applyCommand(const can::CommandData &command);
 	void applyStrobeMode(StrobeMode mode);
 	can::StatusData statusFor(SensorState state, std::uint8_t faults) const;
@@ -157,6 +159,8 @@ private:
 	can::Decoder command_decoder_;
 	std::int64_t last_reject_log_ns_ = 0;
 	std::uint64_t rejects_unlogged_ = 0;
+	/* CLOCK_MONOTONIC when the loop first saw a command held for its MAC frame (0: none held). */
+	std::int64_t command_pending_since_ns_ = 0;
 	SystemdNotifier notifier_;
 	/* The operator preview (preview.enabled, or switched on by a command): every
 	 * preview_every_-th frame, through preview_worker_ when it runs (else inline). */

@@ -795,6 +795,16 @@ public:
 	std::uint64_t freshness() const { return freshness_; }
 	/* The last MAC could not be computed (its frame carries 0: receivers refuse it). */
 	bool macFailed() const { return mac_failed_; }
+	/*
+	 * The next frame at offset continues after alive counter `last`: for a
+	 * sender that shares an identifier with another (two command senders on
+	 * one bus: an arm controller and an operator's view). A receiver keeps one
+	 * alive counter per identifier and refuses a repeated one (StaleAlive).
+	 */
+	void continueAliveAfter(std::uint32_t offset, std::uint8_t last)
+	{
+		alive_[detail::slot(offset)] = static_cast<std::uint8_t>((last + 1) & 0x0f);
+	}
 
 	std::uint32_t baseId() const { return base_id_; }
 	/* The last encodeReport() was asked for a pose it could not send. */
@@ -1090,6 +1100,22 @@ public:
 		command_window_ = window;
 	}
 
+	/* Sensor side, with a key: a DP_Command is held until its DP_CommandAuth. */
+	bool commandPending() const { return command_held_; }
+	/*
+	 * Sensor side: the held DP_Command whose DP_CommandAuth did not come (the
+	 * caller's bound: a sender sends the two back to back) is dropped,
+	 * Rejected (Unauthenticated, counted in unauthenticated); None when none
+	 * is held. A later DP_Command also rejects the one held before it.
+	 */
+	Event dropPendingCommand()
+	{
+		if (!command_held_)
+			return Event::None;
+		command_held_ = false;
+		return reject(FrameError::Unauthenticated, &counters_.unauthenticated);
+	}
+
 	/* Poses older than this at arrival are not valid (feed with arrival_us). */
 	void setMaxAgeUs(std::int64_t max_age_us) { max_age_us_ = max_age_us; }
 	std::int64_t maxAgeUs() const { return max_age_us_; }
@@ -1256,12 +1282,17 @@ private:
 				command_ = parseCommand(d);
 				return Event::Command;
 			}
-			if (command_held_)
-				++counters_.unauthenticated;
-			command_held_ = true;
-			held_command_ = parseCommand(d);
-			command_frame_ = frame;
-			return Event::None;
+			{
+				/* The command held before this one never got its DP_CommandAuth. */
+				const bool orphan = command_held_;
+				command_held_ = true;
+				held_command_ = parseCommand(d);
+				command_frame_ = frame;
+				if (orphan)
+					return reject(FrameError::Unauthenticated,
+						      &counters_.unauthenticated);
+				return Event::None;
+			}
 		default: /* kCommandAuth */
 			return verifyCommand(d);
 		}

@@ -458,15 +458,32 @@ TEST_F(CommandAuthTest, ForgedBitFlippedStaleAndBareCommandsAreRefusedAndCounted
 	EXPECT_EQ(daemon_side_.lastError(), FrameError::Replayed)
 		<< frameErrorName(daemon_side_.lastError());
 
-	/* Bare: a command without its MAC frame is never taken. */
+	/* Bare: a command without its MAC frame is never taken. It is held for its MAC frame
+	 * (commandPending); the next command refuses it, and so does dropPendingCommand(),
+	 * the sensor's bound on the wait. */
 	const RawFrame bare = arm_.encodeCommand(command(1400));
 	EXPECT_EQ(daemon_side_.feed(bare), Event::None);
-	EXPECT_EQ(daemon_side_.feed(arm_.encodeCommand(command(1400))), Event::None);
+	EXPECT_TRUE(daemon_side_.commandPending());
+	EXPECT_EQ(daemon_side_.feed(arm_.encodeCommand(command(1400))), Event::Rejected)
+		<< "the first bare command, superseded";
+	EXPECT_EQ(daemon_side_.lastError(), FrameError::Unauthenticated);
+	EXPECT_TRUE(daemon_side_.commandPending()) << "the second, held in its turn";
+	EXPECT_EQ(daemon_side_.dropPendingCommand(), Event::Rejected);
+	EXPECT_EQ(daemon_side_.lastError(), FrameError::Unauthenticated);
+	EXPECT_FALSE(daemon_side_.commandPending());
+	EXPECT_EQ(daemon_side_.dropPendingCommand(), Event::None) << "nothing held";
 
 	const Decoder::Counters &c = daemon_side_.counters();
 	EXPECT_EQ(c.auth_failures, 2u);
 	EXPECT_EQ(c.replays, 1u);
-	EXPECT_EQ(c.unauthenticated, 1u) << "the first bare command, superseded";
+	EXPECT_EQ(c.unauthenticated, 2u) << "both bare commands";
+
+	/* A signed command after them is taken. */
+	sync();
+	RawFrame signed_cmd[kMaxCommandFrames];
+	ASSERT_EQ(arm_.encodeCommand(command(1500), controller_.freshness(), signed_cmd), 2);
+	EXPECT_EQ(toSensor(signed_cmd, 2), Event::Command);
+	EXPECT_EQ(daemon_side_.command().exposure_us, 1500);
 }
 
 /* The issue's measure: random payloads. With the CRC and alive counter made right and the

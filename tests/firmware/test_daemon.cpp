@@ -750,10 +750,25 @@ TEST(Daemon, WithAKeyReportsAreSignedAndOnlySignedCommandsAreTaken)
 	rig.sendFrames(out, 2);
 	const can::RawFrame bare = can::Encoder(can::kDefaultBaseId).encodeCommand(track);
 	rig.sendFrames(&bare, 1);
-	EXPECT_TRUE(rig.waitFor([&] { return rig.daemon_->stats().commands_rejected >= 1; }, 3s));
+	/* The forged one at its MAC frame; the bare one when its MAC frame has not come within
+	 * the sensor's bound (kCommandAuthWaitNs), with no other command after it. */
+	EXPECT_TRUE(rig.waitFor([&] { return rig.daemon_->stats().commands_rejected >= 2; }, 3s))
+		<< rig.daemon_->stats().commands_rejected << " rejected";
 	std::this_thread::sleep_for(300ms);
 	rig.drain();
 	EXPECT_EQ(rig.heartbeats_.back().mode, can::TrackMode::SearchOnly);
+
+	/* A signed command after them is taken. */
+	ASSERT_EQ(rig.command_encoder_.encodeCommand(track, rig.decoder_.freshness(), out), 2);
+	rig.sendFrames(out, 2);
+	EXPECT_TRUE(rig.waitFor(
+		[&] {
+			return !rig.heartbeats_.empty() &&
+			       rig.heartbeats_.back().mode == can::TrackMode::Track;
+		},
+		3s))
+		<< "a signed command after the refused ones was not applied";
+	EXPECT_EQ(rig.daemon_->stats().commands_rejected, 2u);
 	rig.stop();
 	EXPECT_EQ(rig.decoder_.counters().auth_failures, 0u);
 	EXPECT_GT(rig.decoder_.counters().valid_poses, 10u);
