@@ -509,15 +509,18 @@ TEST_F(SignedCommand, TheSensorTakesTheViewsSignedCommandOnceAndNoneOfAnotherKey
 	can::RawFrame first[can::kMaxCommandFrames];
 	int count = -1;
 	/* No sensor value verified yet: nothing to answer, nothing signed. */
-	EXPECT_NE(
-		sender.encode(cmd, view.sensorFreshness(), first, &count).find("no authenticated"),
-		std::string::npos);
+	EXPECT_NE(sender.encode(cmd, view.sensorFreshness(), view.commandAliveOnBus(), first,
+				&count)
+			  .find("no authenticated"),
+		  std::string::npos);
 	EXPECT_EQ(count, 0);
 
 	/* A heartbeat: the view verifies it and answers the sensor's value. */
 	sensorHeartbeat(&view);
 	ASSERT_EQ(view.sensorFreshness(), sensor_.freshness());
-	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), first, &count), "");
+	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), view.commandAliveOnBus(), first,
+				&count),
+		  "");
 	ASSERT_EQ(count, 2);
 	EXPECT_EQ(first[0].id, can::kDefaultBaseId + can::kCommand);
 	EXPECT_EQ(first[1].id, can::kDefaultBaseId + can::kCommandAuth);
@@ -527,7 +530,9 @@ TEST_F(SignedCommand, TheSensorTakesTheViewsSignedCommandOnceAndNoneOfAnotherKey
 
 	/* The same value again: the sensor would refuse it, so the view does not send it. */
 	can::RawFrame again[can::kMaxCommandFrames];
-	EXPECT_NE(sender.encode(cmd, view.sensorFreshness(), again, &count).find("not moved"),
+	EXPECT_NE(sender.encode(cmd, view.sensorFreshness(), view.commandAliveOnBus(), again,
+				&count)
+			  .find("not moved"),
 		  std::string::npos);
 	EXPECT_EQ(count, 0);
 
@@ -535,7 +540,9 @@ TEST_F(SignedCommand, TheSensorTakesTheViewsSignedCommandOnceAndNoneOfAnotherKey
 	sensorReport(&view);
 	cmd.exposure_us = 1600;
 	can::RawFrame second[can::kMaxCommandFrames];
-	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), second, &count), "");
+	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), view.commandAliveOnBus(), second,
+				&count),
+		  "");
 	ASSERT_EQ(toSensor(second, count), can::Decoder::Event::Command);
 	EXPECT_EQ(daemon_side_.command().exposure_us, 1600);
 
@@ -559,7 +566,8 @@ TEST_F(SignedCommand, TheSensorTakesTheViewsSignedCommandOnceAndNoneOfAnotherKey
 	EXPECT_TRUE(hasProblem(shown, can::frameErrorName(can::FrameError::BadMac)))
 		<< shown["problems"].dump();
 	EXPECT_TRUE(shown["heartbeat"].is_null());
-	EXPECT_NE(other.encode(cmd, other_view.sensorFreshness(), again, &count)
+	EXPECT_NE(other.encode(cmd, other_view.sensorFreshness(), other_view.commandAliveOnBus(),
+			       again, &count)
 			  .find("no authenticated"),
 		  std::string::npos);
 
@@ -568,13 +576,80 @@ TEST_F(SignedCommand, TheSensorTakesTheViewsSignedCommandOnceAndNoneOfAnotherKey
 	fresh_sensor_side.setAuthenticator(&sensor_mac_);
 	fresh_sensor_side.setCommandFreshness(&sensor_, kWindow);
 	can::RawFrame forged[can::kMaxCommandFrames];
-	ASSERT_EQ(other.encode(cmd, view.sensorFreshness(), forged, &count), "");
+	ASSERT_EQ(other.encode(cmd, view.sensorFreshness(), view.commandAliveOnBus(), forged,
+			       &count),
+		  "");
 	EXPECT_EQ(toSensor(forged, count, &fresh_sensor_side), can::Decoder::Event::Rejected);
 	EXPECT_EQ(fresh_sensor_side.lastError(), can::FrameError::BadMac);
 	/* The right view's command answering the same value: taken by both. */
-	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), second, &count), "");
+	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), view.commandAliveOnBus(), second,
+				&count),
+		  "");
 	EXPECT_EQ(toSensor(second, count), can::Decoder::Event::Command);
 	EXPECT_EQ(toSensor(second, count, &fresh_sensor_side), can::Decoder::Event::Command);
+}
+
+/* Two command senders on one bus (the arm controller and the view): the sensor keeps one alive
+ * counter per identifier and refuses a repeated one, so the view's commands go on from the last
+ * DP_Command and DP_CommandAuth it heard on the bus or sent, whoever sent them. */
+TEST_F(SignedCommand, TheViewsCommandsContinueTheAliveCountersHeardOnTheBus)
+{
+	ViewState view;
+	tool::CommandSender sender(can::kDefaultBaseId);
+	ASSERT_TRUE(tool::useCanKey(keyFile("can.key", kKeyHex, 0600), &view, &sender).isOk());
+	sensorHeartbeat(&view);
+
+	/* The controller, with the key (its MAC: the same key's), commands the sensor three
+	 * times; the view hears it. */
+	can::Encoder controller(can::kDefaultBaseId);
+	controller.setAuthenticator(&sensor_mac_);
+	can::CommandData cmd;
+	can::RawFrame out[can::kMaxCommandFrames];
+	for (int i = 0; i < 3; ++i) {
+		sensorReport(&view);
+		cmd.exposure_us = static_cast<std::uint16_t>(1000 + i);
+		ASSERT_EQ(controller.encodeCommand(cmd, view.sensorFreshness(), out), 2);
+		ASSERT_EQ(toSensor(out, 2), can::Decoder::Event::Command);
+		for (const can::RawFrame &f : out)
+			view.feed(f, t_us_);
+	}
+	EXPECT_EQ(view.commandAliveOnBus().command, 2);
+	EXPECT_EQ(view.commandAliveOnBus().command_auth, 2);
+
+	/* The view's command goes on from there: taken, where counters of its own (0) would be
+	 * refused as repeated. */
+	sensorReport(&view);
+	cmd.exposure_us = 1500;
+	int count = 0;
+	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), view.commandAliveOnBus(), out, &count),
+		  "");
+	EXPECT_EQ(out[0].data[6] & 0x0f, 3);
+	ASSERT_EQ(toSensor(out, count), can::Decoder::Event::Command)
+		<< can::frameErrorName(daemon_side_.lastError());
+	EXPECT_EQ(daemon_side_.command().exposure_us, 1500);
+	for (int i = 0; i < count; ++i)
+		view.noteSent(out[i]);
+	EXPECT_EQ(view.commandAliveOnBus().command, 3) << "its own frames count too";
+
+	/* A frame with a bad CRC is not what the sensor counts: ignored. */
+	can::RawFrame bad = out[0];
+	bad.data[6] = static_cast<std::uint8_t>((bad.data[6] & 0xf0) | 9);
+	view.feed(bad, t_us_);
+	EXPECT_EQ(view.commandAliveOnBus().command, 3);
+
+	/* The controller again, then the view again: both taken. */
+	sensorReport(&view);
+	controller.continueAliveAfter(can::kCommand, 3);
+	controller.continueAliveAfter(can::kCommandAuth, 3);
+	ASSERT_EQ(controller.encodeCommand(cmd, view.sensorFreshness(), out), 2);
+	ASSERT_EQ(toSensor(out, 2), can::Decoder::Event::Command);
+	for (const can::RawFrame &f : out)
+		view.feed(f, t_us_);
+	sensorReport(&view);
+	ASSERT_EQ(sender.encode(cmd, view.sensorFreshness(), view.commandAliveOnBus(), out, &count),
+		  "");
+	EXPECT_EQ(toSensor(out, count), can::Decoder::Event::Command)
+		<< can::frameErrorName(daemon_side_.lastError());
 }
 
 TEST_F(SignedCommand, AKeyFileTheSensorWouldRefuseIsRefusedByName)

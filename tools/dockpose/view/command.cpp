@@ -85,7 +85,8 @@ bool CommandSender::signing() const
 }
 
 std::string CommandSender::encode(const can::CommandData &cmd, std::uint64_t sensor_freshness,
-				  can::RawFrame (&out)[can::kMaxCommandFrames], int *count)
+				  BusAlive bus_alive, can::RawFrame (&out)[can::kMaxCommandFrames],
+				  int *count)
 {
 	const std::lock_guard<std::mutex> lock(mutex_);
 	*count = 0;
@@ -97,6 +98,12 @@ std::string CommandSender::encode(const can::CommandData &cmd, std::uint64_t sen
 			return "the sensor's freshness value has not moved since the last command "
 			       "(it takes one command per DP_Auth)";
 	}
+	if (bus_alive.command >= 0)
+		encoder_.continueAliveAfter(can::kCommand,
+					    static_cast<std::uint8_t>(bus_alive.command));
+	if (bus_alive.command_auth >= 0)
+		encoder_.continueAliveAfter(can::kCommandAuth,
+					    static_cast<std::uint8_t>(bus_alive.command_auth));
 	*count = encoder_.encodeCommand(cmd, sensor_freshness, out);
 	if (encoder_.authenticating()) {
 		if (encoder_.macFailed()) {

@@ -7,8 +7,10 @@
  * gain unchanged). The mode and strobe names are the header's (trackModeName(),
  * strobeModeName()). The view encodes the result with a CommandSender.
  *
- * CommandSender: the view's sending path, a can::Encoder (its alive counters
- * go on from command to command). Without a key a command is the bare
+ * CommandSender: the view's sending path, a can::Encoder whose alive counters
+ * go on from the last DP_Command and DP_CommandAuth on the bus, whoever sent
+ * them (ViewState::commandAliveOnBus(): the arm controller may command the
+ * sensor too, and the sensor refuses a repeated counter). Without a key a command is the bare
  * DP_Command, which a keyed sensor refuses. With one (useCanKey: `dockpose
  * view --key FILE`) it is DP_Command and DP_CommandAuth, whose MAC covers
  * the command and the newest sensor freshness value the view verified
@@ -34,10 +36,9 @@
 #include "algo/status.h"
 #include "firmware/protocol/dockpose_can.h"
 #include "firmware/protocol/dockpose_can_cmac.h"
+#include "tools/dockpose/view/view_state.h"
 
 namespace dockpose::tool {
-
-class ViewState;
 
 /* Fill *cmd from body; "" when it is a command, else what is wrong (cmd partly filled). */
 std::string commandFromJson(const nlohmann::json &body, can::CommandData *cmd);
@@ -56,13 +57,15 @@ public:
 
 	/*
 	 * cmd's frames into out[0..*count): DP_Command, and with a key DP_CommandAuth
-	 * answering sensor_freshness (ViewState::sensorFreshness()). "" when they are
+	 * answering sensor_freshness (ViewState::sensorFreshness()), their alive
+	 * counters after bus_alive's (ViewState::commandAliveOnBus()). "" when they are
 	 * ready to send, else why not (nothing written, no counter moved): with a key, no
 	 * sensor value verified yet (0), or one not newer than the last command's (the
 	 * sensor would refuse it as a replay: wait for its next DP_Auth).
 	 */
 	std::string encode(const can::CommandData &cmd, std::uint64_t sensor_freshness,
-			   can::RawFrame (&out)[can::kMaxCommandFrames], int *count);
+			   BusAlive bus_alive, can::RawFrame (&out)[can::kMaxCommandFrames],
+			   int *count);
 
 private:
 	mutable std::mutex mutex_;

@@ -218,11 +218,13 @@ int runView(const ViewArgs &args)
 		int count = 0;
 		const auto deadline = std::chrono::steady_clock::now() + kFreshnessWait;
 		std::uint64_t seen = 0;
-		std::string refused = sender.encode(cmd, state.sensorFreshness(), frames, &count);
+		std::string refused = sender.encode(cmd, state.sensorFreshness(),
+						    state.commandAliveOnBus(), frames, &count);
 		while (!refused.empty() && !stopping &&
 		       std::chrono::steady_clock::now() < deadline) {
 			seen = state.waitForUpdate(seen, std::chrono::milliseconds(20));
-			refused = sender.encode(cmd, state.sensorFreshness(), frames, &count);
+			refused = sender.encode(cmd, state.sensorFreshness(),
+						state.commandAliveOnBus(), frames, &count);
 		}
 		if (!refused.empty()) {
 			sendJson(res, { { "error", "not sent: " + refused } }, 503);
@@ -235,6 +237,7 @@ int runView(const ViewArgs &args)
 				sendJson(res, { { "error", send_error } }, 503);
 				return;
 			}
+			state.noteSent(frames[i]);
 			reply[i == 0 ? "sent" : "mac_frame"] = candumpFrameText(frames[i]);
 		}
 		if (!sender.signing() && state.sensorAuthenticates())

@@ -42,7 +42,8 @@ double roundTo(double value, double res)
 } /* namespace */
 
 ViewState::ViewState(std::uint32_t base_id)
-	: decoder_(base_id)
+	: decoder_(base_id),
+	  base_id_(base_id)
 {
 }
 
@@ -67,6 +68,7 @@ void ViewState::setSource(const std::string &source)
 void ViewState::feed(const can::RawFrame &frame, std::int64_t arrival_us)
 {
 	std::unique_lock<std::mutex> lock(mutex_);
+	noteCommandAlive(frame);
 	const can::Decoder::Event event = decoder_.feed(frame, arrival_us);
 	if (event == can::Decoder::Event::Rejected)
 		noteProblem(can::frameErrorName(decoder_.lastError()), candumpFrameText(frame),
@@ -475,6 +477,29 @@ std::uint64_t ViewState::sensorFreshness() const
 {
 	const std::lock_guard<std::mutex> lock(mutex_);
 	return decoder_.authenticating() ? decoder_.freshness() : 0;
+}
+
+void ViewState::noteCommandAlive(const can::RawFrame &frame)
+{
+	if (frame.len != can::kFrameLength || can::frameCrc(frame.id, frame.data) != frame.data[7])
+		return;
+	const int alive = frame.data[6] & 0x0f;
+	if (frame.id == ((base_id_ + can::kCommand) & 0x7ff))
+		bus_alive_.command = alive;
+	else if (frame.id == ((base_id_ + can::kCommandAuth) & 0x7ff))
+		bus_alive_.command_auth = alive;
+}
+
+BusAlive ViewState::commandAliveOnBus() const
+{
+	const std::lock_guard<std::mutex> lock(mutex_);
+	return bus_alive_;
+}
+
+void ViewState::noteSent(const can::RawFrame &frame)
+{
+	const std::lock_guard<std::mutex> lock(mutex_);
+	noteCommandAlive(frame);
 }
 
 std::uint64_t ViewState::waitForUpdate(std::uint64_t seen, std::chrono::milliseconds timeout) const

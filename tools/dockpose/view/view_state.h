@@ -51,6 +51,12 @@ struct PreviewFrame;
 
 namespace dockpose::tool {
 
+/* The alive counters of the last DP_Command and DP_CommandAuth on the bus (-1: none seen). */
+struct BusAlive {
+	int command = -1;
+	int command_auth = -1;
+};
+
 class ViewState
 {
 public:
@@ -117,6 +123,12 @@ public:
 	/* The newest sensor freshness value whose MAC checked (0: none yet, or no key). Any
 	 * thread. */
 	std::uint64_t sensorFreshness() const;
+	/* The alive counters of the last DP_Command and DP_CommandAuth on the bus with a good
+	 * length and CRC (what the sensor's receiver counts), fed or sent by the view. Any
+	 * thread. */
+	BusAlive commandAliveOnBus() const;
+	/* A frame the view sent (its socket does not hear its own frames). Any thread. */
+	void noteSent(const can::RawFrame &frame);
 
 	/* A counter that moves on every report and problem; waits (any thread) until it
 	 * passes `seen` or `timeout` ends; returns it. wakeAll() ends every wait (shutdown). */
@@ -140,6 +152,8 @@ private:
 	};
 
 	void afterFeed(can::Decoder::Event event, std::int64_t arrival_us);
+	/* A DP_Command or DP_CommandAuth with a good length and CRC: its alive counter. */
+	void noteCommandAlive(const can::RawFrame &frame);
 	void noteProblem(const std::string &name, const std::string &detail, std::int64_t now_us);
 	void countProblems(std::int64_t now_us);
 	std::int64_t periodUs() const;
@@ -151,6 +165,8 @@ private:
 	bool stopping_ = false;
 
 	can::Decoder decoder_;
+	std::uint32_t base_id_;
+	BusAlive bus_alive_;
 	std::unique_ptr<can::OpensslCmac> mac_; /* setKey(): the decoder's MAC */
 	can::Decoder::Counters seen_counters_{};
 	std::string source_;
