@@ -60,6 +60,10 @@ else()
 		board aarch64 ${_fw_aarch64} ${_fw_out}/aarch64-board)
 	_dockpose_fw_test(vm_x86_64_dockposed_late_can vm_kernel_x86_64
 		late-can x86_64 $<TARGET_FILE:dockposed> $<TARGET_FILE:dockpose> ${_fw_out}/x86_64-late-can)
+	# A keyed sensor and the operator view's signed commands on one live bus (x86_64: the view's
+	# HTTP API is driven with the host's curl, which the x86_64 guest has).
+	_dockpose_fw_test(vm_x86_64_view_signed_commands vm_kernel_x86_64
+		keyed-view $<TARGET_FILE:dockposed> $<TARGET_FILE:dockpose> ${_fw_out}/x86_64-keyed-view)
 	_dockpose_fw_test(vm_aarch64_replay_matches_x86_64 "vm_kernel_x86_64;vm_kernel_aarch64"
 		replay $<TARGET_FILE:dockposed> ${_fw_aarch64} $<TARGET_FILE:dockpose> ${_fw_out}/replay)
 	# The virtual pipeline (in 0.5 and 0.7; scripts/libcamera-build enables it; tried on 0.7) plays JPEG

@@ -11,8 +11,9 @@ decodings compared, and the gpio-sim samples.
   firmware_check.py command [--enable 0|1] [--mode track|search_only]
                             [--strobe off|constant|alternate|unchanged] --alive N [--bad-crc]
       print a DP_Command frame for cansend (ID#HEX, base 0x300)
-  firmware_check.py replay-board --board B --camera C --target T --frames DIR --rate HZ -o OUT
-      write a replay variant of the vm board B
+  firmware_check.py replay-board --board B --camera C --target T --frames DIR --rate HZ
+                               [--loop] [--interface IF] [--key-file K --run-counter-file R] -o OUT
+      write a replay variant of the vm board B (with a CAN key: K and R)
   firmware_check.py board DIR
       check a `firmware_guest.sh board` recording
   firmware_check.py replay --truth TRUTH --frames N DIR_A DIR_B
@@ -21,6 +22,11 @@ decodings compared, and the gpio-sim samples.
   firmware_check.py late-can DIR
       check a `firmware_guest.sh late-can` recording: dockposed started without can0, said so
       once, joined can0 when it came, and its poses then arrived
+  firmware_check.py keyed-view --key HEX --bare FRAME DIR
+      check a `firmware_guest.sh keyed-view` recording: every sensor frame's MAC verifies with the
+      key (tests/firmware/can_auth_verify.py: canmatrix and python3-cryptography, not the C++
+      code); the unsigned command FRAME was refused; the view's signed command verifies, is the
+      one its reply names, and was applied; the view showed the authenticated pose the log has
   firmware_check.py jpeg --frames DIR --quality Q -o OUT
       the rendered frames DIR/frame_NNNN.pgm as JPEG files OUT/0.jpg, OUT/1.jpg, ... (the names
       libcamera's virtual pipeline plays in order), with Pillow
@@ -49,6 +55,7 @@ REPO = pathlib.Path(__file__).resolve().parent.parent.parent
 DBC = REPO / "firmware" / "protocol" / "dockpose.dbc"
 CANDECODE = REPO / "scripts" / "candecode"
 CANMATRIX_DECODE = REPO / "tests" / "firmware" / "canmatrix_decode.py"
+CAN_AUTH_VERIFY = REPO / "tests" / "firmware" / "can_auth_verify.py"
 # The CRC of a frame (CRC-8 SAE J1850 over its id and bytes 0..6): candecode's, the Python tools'
 # one copy.
 frame_crc = runpy.run_path(str(CANDECODE))["frame_crc"]
@@ -60,6 +67,8 @@ POSE_IDS = range(BASE_ID, BASE_ID + 5)
 STATUS_ID = BASE_ID + 5
 HEARTBEAT_ID = BASE_ID + 6
 COMMAND_ID = BASE_ID + 0x10
+AUTH_ID = BASE_ID + 0x8
+COMMAND_AUTH_ID = BASE_ID + 0x11
 DOCKPOSED_IDS = range(BASE_ID, BASE_ID + 8)
 POSE_MESSAGES = ["DP_Translation", "DP_QuatA", "DP_QuatB", "DP_Angles", "DP_Sigma"]
 # Pose signals compared between architectures, in raw steps (0.1 mm, 0.0001, 0.01 deg).
@@ -873,6 +882,103 @@ def check_late_can(folder):
 	return c
 
 
+# --------------------------------------------------------------------------- keyed sensor, view's commands
+
+
+def read_json(path):
+	try:
+		return json.loads(path.read_text())
+	except (OSError, ValueError):
+		return None
+
+
+def check_keyed_view(folder, key, bare):
+	c = Checks()
+	folder = pathlib.Path(folder)
+	rec = Recording(c, folder, "keyed")
+	rec.check_no_hang()
+	log = rec.dockposed_log()
+	c.check(rec.dockposed_rc() == 0, "dockposed ran until SIGTERM and exited 0",
+			f"status {rec.dockposed_rc()}; stderr:\n{log}")
+	c.check("dockposed: CAN frames authenticated (AES-128-CMAC" in log and "CAN frames are not authenticated" not in log,
+			"dockposed's stderr says its CAN frames are authenticated", log[:2000])
+	rec.check_decoding(expired_ok=True)
+
+	# Every MAC, checked from docs/can-protocol.md alone (canmatrix + python3-cryptography).
+	rc, out, err = run([PYTHON, CAN_AUTH_VERIFY, "--dbc", DBC, "--key", key, folder / "can.log"])
+	if rc != 0:
+		raise Fatal(f"can_auth_verify: {err.strip()}")
+	v = json.loads(out)
+	auths = sum(1 for _, can_id, _ in rec.all if can_id == AUTH_ID)
+	c.check(v["auth_bad"] == 0 and v["auth_ok"] + v["unsynced"] == auths and v["auth_ok"] >= 0.9 * auths,
+			f"every sensor MAC verifies with the key: {v['auth_ok']} of {auths} DP_Auth groups "
+			f"({v['unsynced']} before the first DP_Freshness)", json.dumps(v))
+	c.check(all(b["raw"]["Authenticated"] == 1 for b in rec.beats) and rec.beats,
+			f"all {len(rec.beats)} heartbeats say Authenticated")
+
+	# The commands on the bus: the bare one, then the view's with its MAC frame.
+	commands = [(t, can_id, data) for t, can_id, data in rec.all if can_id in (COMMAND_ID, COMMAND_AUTH_ID)]
+	text = [f"{can_id:03X}#{data.hex().upper()}" for _, can_id, data in commands]
+	c.check(len(commands) == 3 and text[0] == bare.upper() and commands[1][1] == COMMAND_ID and
+			commands[2][1] == COMMAND_AUTH_ID,
+			"on the bus: the unsigned command, then one DP_Command with its DP_CommandAuth", str(text))
+	c.check(v["command_ok"] == 1 and v["command_bad"] == 0,
+			"the view's command's MAC verifies with the key (answering the sensor's freshness)", json.dumps(v))
+	reply = read_json(folder / "command-reply.json")
+	c.check(reply is not None and reply.get("signed") is True and len(text) == 3 and
+			reply.get("sent") == text[1] and reply.get("mac_frame") == text[2],
+			"POST /api/command replied signed, naming the two frames on the bus",
+			f"{reply}; {(folder / 'command-reply.err').read_text(errors='replace') if (folder / 'command-reply.err').exists() else ''}")
+	rejected = [line for line in log.splitlines() if line.startswith("dockposed: command frame 0x310 rejected")]
+	c.check(len(rejected) == 1 and "not authenticated" in rejected[0],
+			"dockposed refused the unsigned command as not authenticated (its MAC frame never came), "
+			"once, and nothing else",
+			"\n".join(rejected) or log[-2000:])
+	if rejected:
+		c.info(rejected[0])
+
+	# Effects, from the heartbeats (canmatrix): the bare command asked for ALTERNATE, never seen;
+	# TRACK until the view's command, SEARCH_ONLY and CONSTANT after it.
+	if len(commands) == 3:
+		t_view = commands[1][0]
+		before = [b for b in rec.beats if b["timestamp"] < t_view]
+		after = [b for b in rec.beats if b["timestamp"] > t_view]
+		c.check(not any(STROBES[b["raw"]["StrobeMode"]] == "ALTERNATE" for b in rec.beats),
+				"no heartbeat says ALTERNATE (the unsigned command's strobe mode)")
+		c.check(before and all(MODES[b["raw"]["Mode"]] == "TRACK" for b in before),
+				f"TRACK in all {len(before)} heartbeats before the view's command")
+		changed = [b for b in after if MODES[b["raw"]["Mode"]] == "SEARCH_ONLY" and
+				   STROBES[b["raw"]["StrobeMode"]] == "CONSTANT"]
+		c.check(changed and all(b in changed for b in after[after.index(changed[0]):-1]),
+				f"SEARCH_ONLY and CONSTANT from {changed[0]['timestamp'] - t_view:.2f} s after the view's "
+				f"command on, in {len(changed)} heartbeats" if changed else "the view's command applied",
+				"never")
+
+	# What the view showed: a pose the sensor's MACs vouched for, equal to the log's.
+	poses = poses_from_canmatrix(rec.frames)
+	for name in ("state-before.json", "state-after.json"):
+		s = read_json(folder / name)
+		if not c.check(s is not None, f"{name}: /api/state answered"):
+			continue
+		hb = s.get("heartbeat") or {}
+		counters = s.get("counters") or {}
+		c.check(s.get("verifying") is True and hb.get("authenticated") is True and
+				counters.get("auth_failures") == 0 and counters.get("replays") == 0,
+				f"{name}: the view verifies with the key, the heartbeat is authenticated, no MAC failed",
+				json.dumps({k: s.get(k) for k in ("verifying", "heartbeat", "counters")}))
+		p = poses.get(s.get("frame"))
+		c.check(p is not None and all(abs(a - b) <= 0.05 for a, b in
+									  zip(s["t_mm"], [p["phys"][k] for k in ("Tx", "Ty", "Tz")])),
+				f"{name}: its pose (frame {s.get('frame')}) is the log's, within 0.05 mm",
+				f"view {s.get('t_mm')}, log {p['phys'] if p else 'no such frame'}")
+		if name == "state-after.json":
+			c.check(hb.get("mode") == "SEARCH_ONLY" and hb.get("strobe") == "CONSTANT",
+					f"{name}: the view shows the commanded mode", json.dumps(hb))
+	c.check(read_json(folder / "view.rc") == 0, "dockpose view exited 0 on SIGTERM",
+			(folder / "view.err").read_text(errors="replace")[-2000:] if (folder / "view.err").exists() else "")
+	return c
+
+
 # --------------------------------------------------------------------------- virtual camera
 
 
@@ -1046,6 +1152,9 @@ def write_replay_board(args):
 	board["strobe"]["mode"] = "off"
 	if args.interface:
 		board["can"]["interface"] = args.interface
+	if args.key_file:
+		board["can"]["key_file"] = str(pathlib.Path(args.key_file).resolve())
+		board["can"]["run_counter_file"] = str(pathlib.Path(args.run_counter_file).resolve())
 	pathlib.Path(args.out).write_text(json.dumps(board, indent="\t") + "\n")
 
 
@@ -1066,6 +1175,8 @@ def main(argv):
 	rb.add_argument("--rate", type=float, required=True)
 	rb.add_argument("--loop", action="store_true", help="replay the frames over and over")
 	rb.add_argument("--interface", help="the CAN interface (default: the board's)")
+	rb.add_argument("--key-file", help="the CAN key (can.key_file): the sensor authenticates")
+	rb.add_argument("--run-counter-file", help="with --key-file: can.run_counter_file")
 	rb.add_argument("-o", "--out", required=True)
 	bd = sub.add_parser("board")
 	bd.add_argument("folder")
@@ -1087,6 +1198,10 @@ def main(argv):
 	vb.add_argument("--camera-id", required=True)
 	vb.add_argument("--yaml-dir", required=True)
 	vb.add_argument("-o", "--out", required=True)
+	kv = sub.add_parser("keyed-view")
+	kv.add_argument("--key", required=True, help="the key, 32 hex digits")
+	kv.add_argument("--bare", required=True, help="the unsigned command the guest sent, ID#DATA")
+	kv.add_argument("folder")
 	vc = sub.add_parser("virtual")
 	vc.add_argument("--truth", required=True)
 	vc.add_argument("--frames", type=int, required=True)
@@ -1116,6 +1231,8 @@ def main(argv):
 			checks = check_virtual(args.truth, args.frames, args.repeat, args.replay_dir, args.virtual_dir)
 		elif args.cmd == "late-can":
 			checks = check_late_can(args.folder)
+		elif args.cmd == "keyed-view":
+			checks = check_keyed_view(args.folder, args.key, args.bare)
 		else:
 			checks = check_replay(args.truth, args.frames, args.folders)
 	except Fatal as exc:

@@ -33,6 +33,15 @@
 #       (/dev/dma_heap/system or /dev/udmabuf: the kernel fragment's DMABUF_HEAPS_SYSTEM,
 #       UDMABUF); which ones exist goes to dmabuf.txt, and LIBCAMERA_PREFIX/bin/cam -l (when
 #       there is one) to cam-list.txt.
+#   firmware_guest.sh keyed-view OUT DOCKPOSED BOARD MAX_S TOOL KEY PORT BARE HOLD_HB
+#       dockposed --board BOARD (a looping replay board with a CAN key, can.key_file KEY) and the
+#       operator view beside it on the same bus, `TOOL view --can vcan0 --allow-commands --key KEY
+#       --port PORT` (x86_64 guest only: its root is the host's, with curl); once the view's
+#       /api/state shows an authenticated pose (state-before.json): cansend BARE (an unsigned
+#       command: refused) and HOLD_HB heartbeats; then POST /api/command (search only, strobe
+#       constant; the reply in command-reply.json) and wait for the heartbeat saying so; HOLD_HB
+#       more heartbeats, /api/state again (state-after.json); SIGTERM to the view (view.rc,
+#       view.out, view.err) and to dockposed.
 #   firmware_guest.sh late-can OUT DOCKPOSED BOARD MAX_S ABSENT_S REPORTS
 #       the late CAN interface: BOARD (a looping replay board on can0) is started while can0
 #       does not exist; once dockposed's start-up is over (its stderr has the board line), it
@@ -213,7 +222,7 @@ SLACK_S=60
 TERM_WAIT_S=30
 
 mode=${1:-}
-[ $# -ge 2 ] || die "usage: firmware_guest.sh board|replay OUT ..."
+[ $# -ge 2 ] || die "usage: firmware_guest.sh board|replay|virtual|late-can|keyed-view OUT ..."
 OUT=$2
 DOCKPOSED=$3
 BOARD=$4
@@ -222,7 +231,8 @@ board) [ $# -eq 12 ] || die "board: want OUT DOCKPOSED BOARD MAX_S BAD_FRAME GOO
 replay) [ $# -eq 5 ] || die "replay: want OUT DOCKPOSED BOARD MAX_S" ;;
 virtual) [ $# -eq 8 ] || die "virtual: want OUT DOCKPOSED BOARD MAX_S LIBCAMERA_PREFIX YAML_DIR REPORTS" ;;
 late-can) [ $# -eq 7 ] || die "late-can: want OUT DOCKPOSED BOARD MAX_S ABSENT_S REPORTS" ;;
-*) die "unknown mode '$mode' (board, replay, virtual or late-can)" ;;
+keyed-view) [ $# -eq 10 ] || die "keyed-view: want OUT DOCKPOSED BOARD MAX_S TOOL KEY PORT BARE HOLD_HB" ;;
+*) die "unknown mode '$mode' (board, replay, virtual, late-can or keyed-view)" ;;
 esac
 if [ "$mode" = late-can ] && [ -e /sys/class/net/can0 ]; then
 	die "can0 exists before the test: it must be created late"
@@ -235,7 +245,12 @@ done
 line_value=${DOCKPOSE_GPIO_SIM_DIR:?not in a dockpose VM (no DOCKPOSE_GPIO_SIM_DIR)}/sim_gpio3/value
 [ -r "$line_value" ] || die "$line_value: cannot read the gpio-sim line"
 cd "$OUT" || die "cannot cd to $OUT"
-rm -f can.log gpio.txt gpio-after.txt gpioinfo.txt cam-list.txt dockposed.out dockposed.err dockposed.rc hang.txt startup-hang.err dmabuf.txt
+rm -f can.log gpio.txt gpio-after.txt gpioinfo.txt cam-list.txt dockposed.out dockposed.err dockposed.rc hang.txt startup-hang.err dmabuf.txt \
+	state-before.json state-after.json command-reply.json command-reply.err view.out view.err view.rc
+if [ "$mode" = keyed-view ]; then
+	command -v curl >/dev/null 2>&1 || die "curl is not on PATH ($PATH): keyed-view needs the x86_64 guest"
+	[ -x "$6" ] || die "$6: not an executable (the dockpose tool)"
+fi
 
 if [ "$mode" = virtual ]; then
 	lc_prefix=$6 yaml_dir=$7
@@ -403,6 +418,61 @@ if [ "$mode" = board ]; then
 	fi
 	mark stop
 	stop_daemon "after the constant phase"
+fi
+
+if [ "$mode" = keyed-view ]; then
+	tool=$6 key=$7 port=$8 bare=$9 hold_hb=${10}
+	url=http://127.0.0.1:$port
+	mark running
+	"$tool" view --can vcan0 --allow-commands --key "$key" --port "$port" >view.out 2>view.err &
+	view=$!
+	# Up, and verifying the sensor: an authenticated heartbeat and a pose its MACs vouched for.
+	until curl -sf --max-time 5 "$url/api/state" >state-before.json 2>/dev/null &&
+		grep -q '"authenticated":true' state-before.json && grep -q '"t_mm":\[' state-before.json; do
+		kill -0 "$view" 2>/dev/null || break
+		kill -0 "$daemon" 2>/dev/null || break
+		if past_deadline; then
+			hang_report "$daemon" "the view never showed an authenticated pose ($SLACK_S s past --for $5)"
+			break
+		fi
+		sleep 0.3
+	done
+	# An unsigned command with a valid CRC: refused (the sensor has a key).
+	from=$(can_lines)
+	mark bare-command
+	cansend vcan0 "$bare" || echo "firmware_guest: cansend $bare failed" >&2
+	mark bare-command-sent
+	wait_can "$from" "hb >= $hold_hb"
+	# The view's signed command, through its HTTP API as the page sends it.
+	from=$(can_lines)
+	mark view-command
+	curl -sS --max-time 10 -X POST -H 'Content-Type: application/json' \
+		-d '{"enable": true, "mode": "SEARCH_ONLY", "strobe": "CONSTANT"}' \
+		"$url/api/command" >command-reply.json 2>command-reply.err
+	mark view-command-sent
+	# (Gives up after 100 heartbeats, ten seconds at least: the host check says why.)
+	wait_can "$from" "changed >= 1 || hb >= 100"
+	mark changed
+	from=$(can_lines)
+	wait_can "$from" "hb >= $hold_hb"
+	curl -sf --max-time 5 "$url/api/state" >state-after.json 2>/dev/null
+	mark stop
+	kill -TERM "$view" 2>/dev/null
+	waited=0
+	while kill -0 "$view" 2>/dev/null; do
+		if [ $waited -ge $((TERM_WAIT_S * 10)) ]; then
+			hang_report "$view" "dockpose view did not exit within $TERM_WAIT_S s of SIGTERM; SIGKILL"
+			kill -KILL "$view" 2>/dev/null
+			break
+		fi
+		sleep 0.1
+		waited=$((waited + 1))
+	done
+	rc=0
+	wait "$view" || rc=$?
+	echo "$rc" >view.rc
+	rc=0
+	stop_daemon "after the view's command"
 fi
 
 if [ "$mode" = virtual ]; then

@@ -21,6 +21,11 @@
 #       it, Raspberry Pi's 0.7 here) to DOCKPOSED (x86_64, built against that libcamera) with
 #       its libcamera backend in the x86_64 VM; the same PGM frames replayed in the same VM by
 #       the replay camera; the two runs' pose frames compared image by image.
+#   firmware_vm.sh [--timeout S] keyed-view DOCKPOSED DOCKPOSE_TOOL OUT
+#       a sensor with a CAN key (the replay board, looping, with can.key_file) and the operator
+#       view (`dockpose view --can vcan0 --allow-commands --key`) on the same vcan0 in the x86_64
+#       VM: an unsigned command is refused, the view's signed command is applied, every MAC
+#       verifies independently, and the view shows the authenticated pose the bus carried.
 #   firmware_vm.sh [--timeout S] late-can ARCH DOCKPOSED DOCKPOSE_TOOL OUT
 #       the CAN interface comes after dockposed: the replay board, looping, on can0, started in
 #       the ARCH VM while can0 does not exist; can0 is created a few seconds later, and pose
@@ -64,6 +69,8 @@ VIRTUAL_REPORTS=300
 # on can0 that end it.
 LATE_ABSENT_S=4
 LATE_REPORTS=20
+# The keyed run: the view's port in the guest (its own network stack: no clash with the host).
+VIEW_PORT=8099
 
 timeout_s=600
 
@@ -213,6 +220,33 @@ virtual_test() {
 		"$out/replay" "$out/virtual"
 }
 
+keyed_view_test() {
+	[[ $# -eq 3 ]] || die "keyed-view: want DOCKPOSED DOCKPOSE_TOOL OUT"
+	local x86=$1 tool=$2 out=$3
+	need_dockposed x86_64 "$x86"
+	[[ -x $tool ]] || die "no dockpose tool at $tool"
+	fresh_dir "$out"
+	render_frames "$tool" "$out"
+	# A fresh key for this run (can.key_file: 32 hex digits, mode 0600, root's).
+	local key
+	key=$(od -An -tx1 -N16 /dev/urandom | tr -d ' \n')
+	[[ ${#key} -eq 32 ]] || die "cannot read 16 random bytes"
+	(umask 077 && echo "$key" >"$out/can.key")
+	"$CHECK" replay-board --board "$BOARD" --camera "$REPO/board/vm/camera-replay.json" \
+		--target "$REPO/board/vm/target.json" --frames "$out/frames" --rate "$REPLAY_RATE_HZ" \
+		--loop --key-file "$out/can.key" --run-counter-file "$out/run-counter" \
+		-o "$out/board-keyed.json" || die "cannot write the keyed board"
+	local bare
+	# Valid CRC, no MAC: search only, strobe alternate (a mode the run never otherwise shows).
+	bare=$("$CHECK" command --enable 1 --mode search_only --strobe alternate --alive 0)
+	echo "keyed-view: looping replay board with a key ($out/board-keyed.json); the view on port" \
+		"$VIEW_PORT; unsigned command $bare, then the view's signed one; --for $MAX_S s as a cap"
+	in_vm x86_64 "$out" keyed-view "$out" "$x86" "$out/board-keyed.json" "$MAX_S" "$tool" \
+		"$out/can.key" "$VIEW_PORT" "$bare" "$HOLD_HB"
+	echo "== checks ($out)"
+	"$CHECK" keyed-view --key "$key" --bare "$bare" "$out"
+}
+
 replay_test() {
 	[[ $# -eq 4 ]] || die "replay: want DOCKPOSED_X86_64 DOCKPOSED_AARCH64 DOCKPOSE_TOOL OUT"
 	local x86=$1 arm=$2 tool=$3 out=$4
@@ -245,7 +279,7 @@ while [[ $# -gt 0 ]]; do
 	*) break ;;
 	esac
 done
-[[ $# -ge 1 ]] || die "usage: firmware_vm.sh [--timeout S] board|replay|virtual|late-can ..."
+[[ $# -ge 1 ]] || die "usage: firmware_vm.sh [--timeout S] board|replay|virtual|late-can|keyed-view ..."
 cmd=$1
 shift
 case $cmd in
@@ -253,5 +287,6 @@ board) board_test "$@" ;;
 replay) replay_test "$@" ;;
 late-can) late_can_test "$@" ;;
 virtual) virtual_test "$@" ;;
-*) die "unknown test '$cmd' (board, replay, virtual or late-can)" ;;
+keyed-view) keyed_view_test "$@" ;;
+*) die "unknown test '$cmd' (board, replay, virtual, late-can or keyed-view)" ;;
 esac
