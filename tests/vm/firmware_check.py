@@ -318,6 +318,14 @@ class Recording:
 		except (OSError, ValueError):
 			return None
 
+	def check_stopped_cleanly(self, what="dockposed ran until SIGTERM and exited 0"):
+		"""Nothing hung, and dockposed's status was 0 (a run the guest ended with SIGTERM).
+		Returns dockposed's stderr."""
+		self.check_no_hang()
+		log = self.dockposed_log()
+		self.c.check(self.dockposed_rc() == 0, what, f"status {self.dockposed_rc()}; stderr:\n{log}")
+		return log
+
 
 def gpio_samples(folder):
 	"""[(uptime, value)] and {mark: [uptimes]} from gpio.txt."""
@@ -818,10 +826,7 @@ def check_late_can(folder):
 	c = Checks()
 	folder = pathlib.Path(folder)
 	rec = Recording(c, folder, "late-can")
-	rec.check_no_hang()
-	log = rec.dockposed_log()
-	c.check(rec.dockposed_rc() == 0, "dockposed ran until SIGTERM and exited 0, without a restart",
-			f"status {rec.dockposed_rc()}; stderr:\n{log}")
+	log = rec.check_stopped_cleanly("dockposed ran until SIGTERM and exited 0, without a restart")
 	lines = log.splitlines()
 	waiting = [i for i, line in enumerate(lines) if line.startswith('dockposed: can: no CAN interface "can0"')]
 	board = [i for i, line in enumerate(lines) if line.startswith("dockposed: board ")]
@@ -896,10 +901,7 @@ def check_keyed_view(folder, key, bare):
 	c = Checks()
 	folder = pathlib.Path(folder)
 	rec = Recording(c, folder, "keyed")
-	rec.check_no_hang()
-	log = rec.dockposed_log()
-	c.check(rec.dockposed_rc() == 0, "dockposed ran until SIGTERM and exited 0",
-			f"status {rec.dockposed_rc()}; stderr:\n{log}")
+	log = rec.check_stopped_cleanly()
 	c.check("dockposed: CAN frames authenticated (AES-128-CMAC" in log and "CAN frames are not authenticated" not in log,
 			"dockposed's stderr says its CAN frames are authenticated", log[:2000])
 	rec.check_decoding(expired_ok=True)

@@ -176,19 +176,40 @@ hang_report() {
 	} >>"$OUT/hang.txt" 2>&1
 }
 
-# stop_daemon WHY: SIGTERM, up to TERM_WAIT_S s for dockposed to exit, else a hang report
+# stop_pid PID NAME WHY: SIGTERM, up to TERM_WAIT_S s for PID to exit, else a hang report
 # and SIGKILL.
-stop_daemon() {
-	kill -TERM "$daemon" 2>/dev/null || return 0
+stop_pid() {
+	kill -TERM "$1" 2>/dev/null || return 0
 	waited=0
-	while kill -0 "$daemon" 2>/dev/null; do
+	while kill -0 "$1" 2>/dev/null; do
 		if [ $waited -ge $((TERM_WAIT_S * 10)) ]; then
-			hang_report "$daemon" "dockposed did not exit within $TERM_WAIT_S s of SIGTERM ($1); SIGKILL"
-			kill -KILL "$daemon" 2>/dev/null
+			hang_report "$1" "$2 did not exit within $TERM_WAIT_S s of SIGTERM ($3); SIGKILL"
+			kill -KILL "$1" 2>/dev/null
 			return 1
 		fi
 		sleep 0.1
 		waited=$((waited + 1))
+	done
+}
+
+# stop_daemon WHY: stop_pid for dockposed.
+stop_daemon() {
+	stop_pid "$daemon" dockposed "$1"
+}
+
+# wait_valid_poses IFACE N FOR_S: until N status frames (0x305) with PoseValid (byte 0, bit 4)
+# went out on IFACE, dockposed exited, or the run's deadline passed (then a hang report;
+# FOR_S: dockposed's --for, for the report).
+wait_valid_poses() {
+	while [ "$(awk -v iface="$1" '$2 == iface { n = split($3, f, "#"); if (n >= 2 && f[1] == "305" &&
+		int(index("0123456789ABCDEF", toupper(substr(f[2], 1, 1))) - 1) % 2 == 1) v++ }
+		END { print v + 0 }' can.log)" -lt "$2" ]; do
+		kill -0 "$daemon" 2>/dev/null || return 0
+		if past_deadline; then
+			hang_report "$daemon" "fewer than $2 valid poses on $1 $SLACK_S s past --for $3"
+			return 0
+		fi
+		sleep 0.3
 	done
 }
 
@@ -333,20 +354,7 @@ if [ "$mode" = late-can ]; then
 	mark can0-probe
 	cansend can0 7FE#00 || echo "firmware_guest: cansend can0 failed" >&2
 	mark can0-probe-sent
-	# Status frames (0x305) on can0 with PoseValid (byte 0, bit 4).
-	valid_on_can0() {
-		awk '$2 == "can0" { n = split($3, f, "#"); if (n >= 2 && f[1] == "305" &&
-			int(index("0123456789ABCDEF", toupper(substr(f[2], 1, 1))) - 1) % 2 == 1) v++ }
-			END { print v + 0 }' can.log
-	}
-	while [ "$(valid_on_can0)" -lt "$reports" ]; do
-		kill -0 "$daemon" 2>/dev/null || break
-		if past_deadline; then
-			hang_report "$daemon" "fewer than $reports valid poses on can0 $SLACK_S s past --for $5"
-			break
-		fi
-		sleep 0.3
-	done
+	wait_valid_poses can0 "$reports" "$5"
 	mark stop
 	stop_daemon "after $reports valid poses on can0"
 fi
@@ -457,17 +465,7 @@ if [ "$mode" = keyed-view ]; then
 	wait_can "$from" "hb >= $hold_hb"
 	curl -sf --max-time 5 "$url/api/state" >state-after.json 2>/dev/null
 	mark stop
-	kill -TERM "$view" 2>/dev/null
-	waited=0
-	while kill -0 "$view" 2>/dev/null; do
-		if [ $waited -ge $((TERM_WAIT_S * 10)) ]; then
-			hang_report "$view" "dockpose view did not exit within $TERM_WAIT_S s of SIGTERM; SIGKILL"
-			kill -KILL "$view" 2>/dev/null
-			break
-		fi
-		sleep 0.1
-		waited=$((waited + 1))
-	done
+	stop_pid "$view" "dockpose view" "after its command"
 	rc=0
 	wait "$view" || rc=$?
 	echo "$rc" >view.rc
@@ -478,20 +476,7 @@ fi
 if [ "$mode" = virtual ]; then
 	reports=$8
 	mark running
-	# Status frames (0x305) on vcan0 with PoseValid (byte 0, bit 4).
-	valid_on_vcan0() {
-		awk '$2 == "vcan0" { n = split($3, f, "#"); if (n >= 2 && f[1] == "305" &&
-			int(index("0123456789ABCDEF", toupper(substr(f[2], 1, 1))) - 1) % 2 == 1) v++ }
-			END { print v + 0 }' can.log
-	}
-	while [ "$(valid_on_vcan0)" -lt "$reports" ]; do
-		kill -0 "$daemon" 2>/dev/null || break
-		if past_deadline; then
-			hang_report "$daemon" "fewer than $reports valid poses on vcan0 $SLACK_S s past --for $5"
-			break
-		fi
-		sleep 0.3
-	done
+	wait_valid_poses vcan0 "$reports" "$5"
 	mark stop
 	stop_daemon "after $reports valid poses"
 fi
