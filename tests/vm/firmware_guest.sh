@@ -213,6 +213,14 @@ wait_valid_poses() {
 	done
 }
 
+# send_marked NAME FRAME: cansend FRAME on vcan0 between the marks NAME and NAME-sent (they tie
+# candump's clock to /proc/uptime for the host's checks).
+send_marked() {
+	mark "$1"
+	cansend vcan0 "$2" || echo "firmware_guest: cansend $2 failed" >&2
+	mark "$1-sent"
+}
+
 can_lines() {
 	wc -l <can.log | tr -d ' '
 }
@@ -401,9 +409,7 @@ if [ "$mode" = board ]; then
 	while [ $try -lt "$reject_tries" ]; do
 		try=$((try + 1))
 		from=$(can_lines)
-		mark bad-command
-		cansend vcan0 "$bad" || echo "firmware_guest: cansend $bad failed" >&2
-		mark bad-command-sent
+		send_marked bad-command "$bad"
 		wait_can "$from" "hb >= $hold_hb" || break
 		[ "$held" -eq 0 ] || break
 		echo "firmware_guest: try $try: no loop iteration after the command sent a frame within" \
@@ -411,9 +417,7 @@ if [ "$mode" = board ]; then
 	done
 	# The good command, and its effect.
 	from=$(can_lines)
-	mark good-command
-	cansend vcan0 "$good" || echo "firmware_guest: cansend $good failed" >&2
-	mark good-command-sent
+	send_marked good-command "$good"
 	# (Gives up after 100 heartbeats, ten seconds at least: the host check says why.)
 	wait_can "$from" "changed >= 1 || hb >= 100"
 	mark changed
@@ -447,9 +451,7 @@ if [ "$mode" = keyed-view ]; then
 	done
 	# An unsigned command with a valid CRC: refused (the sensor has a key).
 	from=$(can_lines)
-	mark bare-command
-	cansend vcan0 "$bare" || echo "firmware_guest: cansend $bare failed" >&2
-	mark bare-command-sent
+	send_marked bare-command "$bare"
 	wait_can "$from" "hb >= $hold_hb"
 	# The view's signed command, through its HTTP API as the page sends it.
 	from=$(can_lines)
