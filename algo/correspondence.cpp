@@ -33,16 +33,27 @@ bool convexOrder(const Eigen::Vector2d *p, const int idx[4], int order[4])
 	for (int k = 0; k < 4; ++k)
 		c += p[idx[k]];
 	c *= 0.25;
-	double angle[4];
+	/*
+	 * By angle about the centroid, as atan2 orders them (from -pi to pi),
+	 * without atan2: the half-plane first (y < 0, then the positive x axis,
+	 * y > 0, the negative x axis), then the turn between the two.
+	 */
+	Eigen::Vector2d d[4];
+	int half[4];
 	for (int k = 0; k < 4; ++k) {
-		const Eigen::Vector2d d = p[idx[k]] - c;
-		angle[k] = std::atan2(d.y(), d.x());
+		d[k] = p[idx[k]] - c;
 		order[k] = idx[k];
+		const double x = d[k].x(), y = d[k].y();
+		half[k] = y < 0.0 ? 0 : y > 0.0 ? 2 : x < 0.0 ? (std::signbit(y) ? -1 : 3) : 1;
 	}
+	auto after = [&](int a, int b) {
+		return half[a] > half[b] || (half[a] == half[b] && cross2(d[a], d[b]) < 0.0);
+	};
 	/* Insertion sort of four by angle. */
 	for (int i = 1; i < 4; ++i)
-		for (int j = i; j > 0 && angle[j - 1] > angle[j]; --j) {
-			std::swap(angle[j - 1], angle[j]);
+		for (int j = i; j > 0 && after(j - 1, j); --j) {
+			std::swap(d[j - 1], d[j]);
+			std::swap(half[j - 1], half[j]);
 			std::swap(order[j - 1], order[j]);
 		}
 	double scale2 = 0.0;
@@ -108,6 +119,59 @@ Correspondence::Correspondence(TargetModel target, const CameraModel &camera,
 	orientFaces();
 	findSymmetries();
 	findCongruences();
+	findTriangleModels();
+	findQuadAssignments();
+}
+
+/*
+ * The model triangles the hidden-vertex search tries: each face with one
+ * vertex missing (a hidden LED of only one face leaves the other faces
+ * complete for the quadrilateral search, so only shared vertices, or any
+ * vertex of a lone face), its other three in cyclic order, the one direction
+ * round in which a face seen from its front keeps its orientation in the
+ * image (tryAssignment's sign rule: det[q_i q_j q_k] / A < 0): the image
+ * triangle is counter-clockwise, so the model's must be clockwise about the
+ * front normal; the other direction's poses all see the face from behind.
+ * Triangles with equal sides share their P3P depths (sides_class).
+ */
+void Correspondence::findTriangleModels()
+{
+	for (std::size_t f = 0; f < target_.faces.size(); ++f)
+		for (int missing = 0; missing < 4; ++missing) {
+			if (target_.faces.size() > 1 &&
+			    __builtin_popcount(led_faces_[target_.faces[f][missing]]) < 2)
+				continue;
+			for (int dir = -1; dir <= 1; dir += 2) {
+				TriangleModel tm;
+				tm.face = f;
+				for (int k = 0; k < 3; ++k)
+					tm.vertex[k] = ((missing + dir * (k + 1)) % 4 + 4) % 4;
+				const auto &plane = face_plane_[f];
+				if (!(cross2(plane[tm.vertex[1]] - plane[tm.vertex[0]],
+					     plane[tm.vertex[2]] - plane[tm.vertex[0]]) < 0.0))
+					continue;
+				for (int k = 0; k < 3; ++k) {
+					const int led = target_.faces[f][tm.vertex[k]];
+					tm.leds |= 1u << led;
+					tm.model_mm[k] = target_.points_mm[led];
+				}
+				p3pSides(tm.model_mm.data(), tm.sides_mm2.data());
+				tm.sides_class = static_cast<int>(triangle_models_.size());
+				for (const TriangleModel &other : triangle_models_) {
+					bool same = true;
+					for (int k = 0; k < 3; ++k)
+						same = same && std::abs(other.sides_mm2[k] -
+									tm.sides_mm2[k]) <=
+								       1e-12 * tm.sides_mm2[k];
+					if (same) {
+						tm.sides_class = other.sides_class;
+						break;
+					}
+				}
+				if (!triangle_models_.full())
+					triangle_models_.push_back(tm);
+			}
+		}
 }
 
 /* Front normals, face centres and in-plane vertex coordinates of every face. */
@@ -356,15 +420,15 @@ int Correspondence::matchPredicted(const Pose &pose, double gate_px, Match *matc
 			continue;
 		int best = -1;
 		double best_d2 = gate2;
-		for (std::size_t j = 0; j < px_.size(); ++j) {
-			if (!usable_[j])
-				continue;
+		forCandidatesNear(uv.x(), gate_px, [&](int j) {
 			const double d2 = (px_[j] - uv).squaredNorm();
-			if (d2 < best_d2) {
+			/* The nearest; of equals the first candidate, as in index order. */
+			if (d2 < best_d2 || (d2 == best_d2 && best >= 0 && j < best)) {
 				best_d2 = d2;
-				best = static_cast<int>(j);
+				best = j;
 			}
-		}
+			return false;
+		});
 		if (best < 0)
 			continue;
 		if (owner[best] >= 0) {
@@ -410,13 +474,12 @@ bool Correspondence::moreLedsOnCandidates(const Pose &pose, double gate_px, std:
 		if (!camera_.project(pose.apply(target_.points_mm[i]), &uv) ||
 		    !camera_.inImage(uv, -gate_px))
 			continue;
-		for (std::size_t j = 0; j < px_.size(); ++j)
-			if (usable_[j] && !(own_candidates & (std::uint64_t{ 1 } << j)) &&
-			    (px_[j] - uv).squaredNorm() < gate2) {
-				if (++found >= needed)
-					return true;
-				break;
-			}
+		const bool hit = forCandidatesNear(uv.x(), gate_px, [&](int j) {
+			return !(own_candidates & (std::uint64_t{ 1 } << j)) &&
+			       (px_[j] - uv).squaredNorm() < gate2;
+		});
+		if (hit && ++found >= needed)
+			return true;
 	}
 	return false;
 }
@@ -851,60 +914,102 @@ void Correspondence::keep(const Hypothesis &h)
 }
 
 /*
- * One assignment of four image points (normalised q, pixels uv) to the
- * vertices of face f (vertex[k] is the face-local index for image point k).
- * Screens, solves, verifies and keeps the hypothesis; returns true when it is
- * good enough to stop the search.
+ * The shape screen of one assignment of four image points (normalised q, their
+ * quadDeterminants() D) to the vertices of face f (quad_assignments_),
+ * exact under perspective: the depths the image implies, and the six side
+ * lengths they give. True when the face could be seen so.
  */
-bool Correspondence::tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4],
-				   const Eigen::Matrix2d cov[4], std::size_t f, const int vertex[4])
+bool Correspondence::quadShape(const Eigen::Vector2d q[4], const double D[4], std::size_t f,
+			       int assignment) const
 {
-	++hypotheses_;
-	Eigen::Vector2d plane[4];
-	Eigen::Vector3d model[4];
-	for (int k = 0; k < 4; ++k) {
-		plane[k] = face_plane_[f][vertex[k]];
-		model[k] = target_.points_mm[target_.faces[f][vertex[k]]];
-	}
-
+	const QuadAssignment &qa = quad_assignments_[f][static_cast<std::size_t>(assignment)];
 	/*
-	 * Screen: the depths Z_m ∝ D_(m)/A_(m). With A signed about the face's
-	 * front normal, det[P_i P_j P_k] = 2 A (n . P_i) and n . P_i < 0 when the
+	 * The depths Z_m ∝ D_(m)/A_(m). With A signed about the face's front
+	 * normal, det[P_i P_j P_k] = 2 A (n . P_i) and n . P_i < 0 when the
 	 * camera sees the front: so D/A < 0 for all four exactly when the face
 	 * is seen from its front. Any other sign pattern is rejected here.
 	 */
 	double Z[4];
 	for (int m = 0; m < 4; ++m) {
-		const int i = (m + 1) % 4, j = (m + 2) % 4, l = (m + 3) % 4;
-		const double D =
-			cross2(q[j] - q[i], q[l] - q[i]); /* det[q_i q_j q_l] with unit third row */
-		const double A = cross2(plane[j] - plane[i], plane[l] - plane[i]);
-		Z[m] = -D / A;
+		Z[m] = -D[m] / qa.area[m];
 		if (!(Z[m] > 0.0) || !std::isfinite(Z[m]))
 			return false;
 	}
-	{
-		/* ... and reproduce the face's six side lengths up to one scale. */
-		double sdl = 0.0, sdd = 0.0, sll = 0.0, d_ij[6], l_ij[6];
-		int e = 0;
-		for (int i = 0; i < 4; ++i)
-			for (int j = i + 1; j < 4; ++j, ++e) {
-				const Eigen::Vector3d pi{ q[i].x() * Z[i], q[i].y() * Z[i], Z[i] };
-				const Eigen::Vector3d pj{ q[j].x() * Z[j], q[j].y() * Z[j], Z[j] };
-				d_ij[e] = (pi - pj).norm();
-				l_ij[e] = (plane[i] - plane[j]).norm();
-				sdl += d_ij[e] * l_ij[e];
-				sdd += d_ij[e] * d_ij[e];
-				sll += l_ij[e] * l_ij[e];
-			}
-		const double scale = sdl / sdd;
-		double res = 0.0;
-		for (int k = 0; k < 6; ++k)
-			res += (scale * d_ij[k] - l_ij[k]) * (scale * d_ij[k] - l_ij[k]);
-		if (!(res <= 0.04 * sll))
-			return false;
-	}
+	/* ... and reproduce the face's six side lengths up to one scale. */
+	double sdl = 0.0, sdd = 0.0, d_ij[6];
+	int e = 0;
+	for (int i = 0; i < 4; ++i)
+		for (int j = i + 1; j < 4; ++j, ++e) {
+			const Eigen::Vector3d pi{ q[i].x() * Z[i], q[i].y() * Z[i], Z[i] };
+			const Eigen::Vector3d pj{ q[j].x() * Z[j], q[j].y() * Z[j], Z[j] };
+			d_ij[e] = (pi - pj).norm();
+			sdl += d_ij[e] * qa.side[e];
+			sdd += d_ij[e] * d_ij[e];
+		}
+	const double scale = sdl / sdd;
+	double res = 0.0;
+	for (int k = 0; k < 6; ++k)
+		res += (scale * d_ij[k] - qa.side[k]) * (scale * d_ij[k] - qa.side[k]);
+	return res <= 0.04 * qa.sides2;
+}
 
+/* The determinants quadShape() divides, of a quadrilateral's image points: det[q_i q_j q_l]. */
+void Correspondence::quadDeterminants(const Eigen::Vector2d q[4], double D[4])
+{
+	for (int m = 0; m < 4; ++m) {
+		const int i = (m + 1) % 4, j = (m + 2) % 4, l = (m + 3) % 4;
+		D[m] = cross2(q[j] - q[i], q[l] - q[i]); /* with unit third row */
+	}
+}
+
+/* Assignment a = 4 (dir + 1) / 2 + rot: image point k on face-local vertex (rot + dir k) mod 4. */
+void Correspondence::findQuadAssignments()
+{
+	for (std::size_t f = 0; f < target_.faces.size(); ++f) {
+		std::array<QuadAssignment, 8> table{};
+		for (int dir = -1; dir <= 1; dir += 2)
+			for (int rot = 0; rot < 4; ++rot) {
+				QuadAssignment &qa =
+					table[static_cast<std::size_t>(4 * (dir + 1) / 2 + rot)];
+				Eigen::Vector2d plane[4];
+				for (int k = 0; k < 4; ++k) {
+					qa.vertex[k] = ((rot + dir * k) % 4 + 4) % 4;
+					plane[k] = face_plane_[f][qa.vertex[k]];
+				}
+				for (int m = 0; m < 4; ++m) {
+					const int i = (m + 1) % 4, j = (m + 2) % 4, l = (m + 3) % 4;
+					qa.area[m] =
+						cross2(plane[j] - plane[i], plane[l] - plane[i]);
+				}
+				int e = 0;
+				qa.sides2 = 0.0;
+				for (int i = 0; i < 4; ++i)
+					for (int j = i + 1; j < 4; ++j, ++e) {
+						qa.side[e] = (plane[i] - plane[j]).norm();
+						qa.sides2 += qa.side[e] * qa.side[e];
+					}
+			}
+		quad_assignments_.push_back(table);
+	}
+}
+
+/*
+ * One assignment that passed quadShape() (image point k: candidate
+ * candidate[k] on face-local vertex[k]): the closed-form pose, then
+ * verification; true when it is good enough to stop the search.
+ */
+bool Correspondence::tryAssignment(const int candidate[4], std::size_t f, const int vertex[4])
+{
+	Eigen::Vector2d q[4], uv[4];
+	Eigen::Matrix2d cov[4];
+	Eigen::Vector3d model[4];
+	for (int k = 0; k < 4; ++k) {
+		const int c = candidate[k];
+		q[k] = xy_[c];
+		uv[k] = px_[c];
+		cov[k] = cov_[c];
+		model[k] = target_.points_mm[target_.faces[f][vertex[k]]];
+	}
 	Pose pose;
 	if (!solveFourCoplanar(model, q, &pose))
 		return false;
@@ -1045,18 +1150,16 @@ std::uint64_t Correspondence::triangleNeighbours(int a) const
 
 /*
  * The perspective invariant of a quadrilateral in convex order q[0..3]
- * (normalised coordinates) against face f in the assignment vertex[]: the
- * fractions at which its diagonals cross equal the face's own in an affine
- * view; perspective moves a fraction s along a diagonal whose ends differ in
- * depth by dZ by s (1 - s) dZ / Z <= dZ / 4Z, and dZ / Z <= l tan(theta) for a
- * diagonal of image length l tilted by at most the largest view angle theta.
- * Centroid noise adds about sigma / l.
+ * (normalised coordinates): the fractions at which its diagonals cross equal
+ * the face's own in an affine view; perspective moves a fraction s along a
+ * diagonal whose ends differ in depth by dZ by s (1 - s) dZ / Z <= dZ / 4Z, and
+ * dZ / Z <= l tan(theta) for a diagonal of image length l tilted by at most the
+ * largest view angle theta. Centroid noise adds about sigma / l. Computed once
+ * per quadrilateral; screenQuad() compares it with each face and assignment.
  */
-bool Correspondence::screenQuad(const Eigen::Vector2d q[4], std::size_t f,
-				const int vertex[4]) const
+bool Correspondence::quadInvariant(const Eigen::Vector2d q[4], QuadInvariant *inv) const
 {
-	double s = 0.0, t = 0.0;
-	if (!diagonalCross(q[0], q[1], q[2], q[3], &s, &t))
+	if (!diagonalCross(q[0], q[1], q[2], q[3], &inv->s, &inv->t))
 		return false;
 	const double tan_max = tan_view_max_;
 	const double sigma = config_.screen_sigma_px / camera_.intrinsics().fx;
@@ -1066,16 +1169,24 @@ bool Correspondence::screenQuad(const Eigen::Vector2d q[4], std::size_t f,
 			return 1.0;
 		return 1.25 * 0.25 * x / (1.0 - 0.5 * x) + 4.0 * sigma / std::max(l, 1e-12);
 	};
-	const double l02 = (q[2] - q[0]).norm(), l13 = (q[3] - q[1]).norm();
-	return std::abs(s - diagonal_frac_[f][vertex[0]]) <= tolerance(l02) &&
-	       std::abs(t - diagonal_frac_[f][vertex[1]]) <= tolerance(l13);
+	inv->tol_s = tolerance((q[2] - q[0]).norm());
+	inv->tol_t = tolerance((q[3] - q[1]).norm());
+	return true;
+}
+
+/* The invariant against face f in the assignment vertex[]. */
+bool Correspondence::screenQuad(const QuadInvariant &inv, std::size_t f, const int vertex[4]) const
+{
+	return std::abs(inv.s - diagonal_frac_[f][vertex[0]]) <= inv.tol_s &&
+	       std::abs(inv.t - diagonal_frac_[f][vertex[1]]) <= inv.tol_t;
 }
 
 /*
  * Quadrilaterals of each candidate and three of its neighbours, strongest
  * anchors first, each set once (at the strongest member whose neighbours
  * hold the other three), in convex position, screened against every face in
- * its 8 assignments.
+ * its 8 assignments (the invariant, once per quadrilateral, then
+ * quadShape()), and the survivors solved and verified at once.
  */
 bool Correspondence::searchQuads()
 {
@@ -1109,32 +1220,48 @@ bool Correspondence::searchQuads()
 					int order[4];
 					if (!convexOrder(xy_.data(), idx, order))
 						continue;
-					Eigen::Vector2d q[4], uv[4];
-					Eigen::Matrix2d cov[4];
-					for (int k = 0; k < 4; ++k) {
+					Eigen::Vector2d q[4];
+					for (int k = 0; k < 4; ++k)
 						q[k] = xy_[order[k]];
-						uv[k] = px_[order[k]];
-						cov[k] = cov_[order[k]];
-					}
+					QuadInvariant inv;
+					if (!quadInvariant(q, &inv))
+						continue;
+					double D[4];
+					quadDeterminants(q, D);
 					for (std::size_t f = 0; f < target_.faces.size(); ++f)
-						for (int dir = -1; dir <= 1; dir += 2)
-							for (int rot = 0; rot < 4; ++rot) {
-								int vertex[4];
-								for (int k = 0; k < 4; ++k)
-									vertex[k] =
-										((rot + dir * k) %
-											 4 +
-										 4) %
-										4;
-								if (!screenQuad(q, f, vertex))
-									continue;
-								if (tryAssignment(q, uv, cov, f,
-										  vertex))
-									return true;
-							}
+						for (int as = 0; as < 8; ++as) {
+							const int *vertex =
+								quad_assignments_
+									[f][static_cast<std::size_t>(
+										    as)]
+										.vertex.data();
+							if (!screenQuad(inv, f, vertex))
+								continue;
+							++hypotheses_;
+							if (quadShape(q, D, f, as) &&
+							    tryAssignment(order, f, vertex))
+								return true;
+						}
 				}
 	}
 	return false;
+}
+
+/*
+ * The LEDs a triangle's pose must put on candidates to matter: a pose counts
+ * only when it is acceptable and explains more LEDs than every acceptable
+ * pose kept so far (better()), or as many (a rival: ambiguity); with none
+ * kept, the floor min_leds_search. (Counted at P3P's pose within the normal
+ * gate, as the first extra LED always was.) Kept in triangle_leds_ while the
+ * search runs: the best acceptable pose is never evicted, so it only grows.
+ */
+int Correspondence::triangleLeds() const
+{
+	int leds = minLeds(false);
+	for (const auto &h : kept_)
+		if (acceptable(h))
+			leds = std::max(leds, static_cast<int>(h.match.pairs.size()));
+	return leds;
 }
 
 /*
@@ -1142,13 +1269,14 @@ bool Correspondence::searchQuads()
  * P3P, each seen from the face's front, must put one more LED on a candidate
  * before it is verified. True: stop the search.
  */
-bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3],
-				 std::size_t f, std::uint32_t own_leds,
-				 std::uint64_t own_candidates)
+bool Correspondence::tryTriangle(const TriangleModel &triangle, const Eigen::Vector2d q[3],
+				 const P3pDepths &depths, std::uint64_t own_candidates)
 {
 	++hypotheses_;
+	const std::size_t f = triangle.face;
+	const std::uint32_t own_leds = triangle.leds;
 	Pose poses[4];
-	const int n = solveP3p(model, q, poses);
+	const int n = p3pPoses(triangle.model_mm.data(), q, depths, poses);
 	for (int k = 0; k < n; ++k) {
 		const Pose &pose = poses[k];
 		if (!faceVisible(pose, f) || !plausible(pose))
@@ -1161,7 +1289,7 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
 		 */
 		const double gate = gatePx(pose);
 		if (!moreLedsOnCandidates(pose, gate, own_leds, own_candidates,
-					  minLeds(false) - 3) ||
+					  triangle_leds_ - 3) ||
 		    verified_ >= config_.max_verifications)
 			continue;
 		++verified_;
@@ -1170,6 +1298,9 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
 		if (!refineMatch(pose, gate, minLeds(false), &h))
 			continue;
 		keep(h);
+		if (acceptable(h))
+			triangle_leds_ =
+				std::max(triangle_leds_, static_cast<int>(h.match.pairs.size()));
 		if (earlyExit(h))
 			return true;
 	}
@@ -1185,6 +1316,7 @@ bool Correspondence::tryTriangle(const Eigen::Vector3d model[3], const Eigen::Ve
  */
 bool Correspondence::searchTriangles()
 {
+	triangle_leds_ = triangleLeds();
 	const int budget =
 		std::min(config_.max_hypotheses, hypotheses_ + config_.max_triangle_hypotheses);
 	for (int a0 = 0; a0 < n_cand_; ++a0) {
@@ -1225,66 +1357,33 @@ bool Correspondence::searchTriangles()
 								  (t[0] - t[2]).squaredNorm() });
 				if (area < 0.05 * extent2)
 					continue;
-				for (std::size_t f = 0; f < target_.faces.size(); ++f)
-					for (int missing = 0; missing < 4; ++missing) {
-						/*
-						 * A hidden LED of only one face leaves the other faces
-						 * complete for the quadrilateral search: only shared
-						 * vertices need trying (any vertex for a lone face).
-						 */
-						if (target_.faces.size() > 1 &&
-						    __builtin_popcount(
-							    led_faces_[target_.faces[f][missing]]) <
-							    2)
-							continue;
-						for (int dir = -1; dir <= 1; dir += 2) {
-							/* Face vertices in cyclic order (direction dir) starting after `missing`. */
-							int vertex[3];
-							for (int k = 0; k < 3; ++k)
-								vertex[k] =
-									((missing + dir * (k + 1)) %
-										 4 +
-									 4) %
-									4;
-							/*
-							 * Seen from its front, a face keeps its orientation
-							 * in the image only one way round (tryAssignment's
-							 * sign rule: det[q_i q_j q_k] / A < 0): the image
-							 * triangle is counter-clockwise, so the model's
-							 * must be clockwise about the front normal. The
-							 * other direction's poses all see the face from
-							 * behind; they are never solved.
-							 */
-							const auto &plane = face_plane_[f];
-							if (!(cross2(plane[vertex[1]] -
-									     plane[vertex[0]],
-								     plane[vertex[2]] -
-									     plane[vertex[0]]) <
-							      0.0))
-								continue;
-							std::uint32_t leds = 0;
-							for (const int v : vertex)
-								leds |= 1u << target_.faces[f][v];
-							const std::uint64_t cands =
-								(std::uint64_t{ 1 } << ti[0]) |
-								(std::uint64_t{ 1 } << ti[1]) |
-								(std::uint64_t{ 1 } << ti[2]);
-							for (int rot = 0; rot < 3; ++rot) {
-								Eigen::Vector3d model[3];
-								Eigen::Vector2d q[3];
-								for (int k = 0; k < 3; ++k) {
-									model[k] =
-										target_.points_mm
-											[target_.faces
-												 [f]
-												 [vertex[k]]];
-									q[k] = t[(k + rot) % 3];
-								}
-								if (tryTriangle(model, q, f, leds,
-										cands))
-									return true;
-							}
+				/*
+				 * Each model triangle in each of the three ways round; the
+				 * depths once per ray order and side lengths.
+				 */
+				if (++depth_stamp_ == 0) { /* wrapped: forget every stamp */
+					for (auto &row : depth_stamps_)
+						row.fill(0);
+					depth_stamp_ = 1;
+				}
+				const std::uint64_t cands = (std::uint64_t{ 1 } << ti[0]) |
+							    (std::uint64_t{ 1 } << ti[1]) |
+							    (std::uint64_t{ 1 } << ti[2]);
+				for (const TriangleModel &triangle : triangle_models_)
+					for (int rot = 0; rot < 3; ++rot) {
+						Eigen::Vector2d q[3];
+						for (int k = 0; k < 3; ++k)
+							q[k] = t[(k + rot) % 3];
+						const std::size_t c = static_cast<std::size_t>(
+							triangle.sides_class);
+						if (depth_stamps_[rot][c] != depth_stamp_) {
+							solveP3pDepths(q, triangle.sides_mm2.data(),
+								       &depths_[rot][c]);
+							depth_stamps_[rot][c] = depth_stamp_;
 						}
+						if (tryTriangle(triangle, q, depths_[rot][c],
+								cands))
+							return true;
 					}
 			}
 	}
@@ -1439,6 +1538,17 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 		const double det = cov(0, 0) * cov(1, 1) - cov(0, 1) * cov(0, 1);
 		var_.push_back(half_tr + std::sqrt(std::max(half_tr * half_tr - det, 0.0)));
 	}
+	/* Usable candidates by column, for the gated look-ups. */
+	by_u_.clear();
+	for (std::size_t j = 0; j < px_.size(); ++j)
+		if (usable_[j])
+			by_u_.push_back(static_cast<std::int8_t>(j));
+	std::sort(by_u_.begin(), by_u_.end(), [this](std::int8_t a, std::int8_t b) {
+		return px_[a].x() < px_[b].x() || (px_[a].x() == px_[b].x() && a < b);
+	});
+	u_sorted_.clear();
+	for (const std::int8_t j : by_u_)
+		u_sorted_.push_back(px_[j].x());
 	log10_quad_tests_ = log10Tests(false);
 	log10_triangle_tests_ = log10Tests(true);
 	if (n_cand_ < minLeds(true))

@@ -60,6 +60,7 @@
  */
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 
@@ -68,6 +69,7 @@
 #include "algo/blob_detector.h"
 #include "algo/camera_model.h"
 #include "algo/capacities.h"
+#include "algo/p3p.h"
 #include "algo/pose.h"
 #include "algo/static_vector.h"
 #include "algo/target_model.h"
@@ -215,12 +217,57 @@ private:
 	void canonicalise(const Pose *reference, Hypothesis *hypothesis) const;
 	void keep(const Hypothesis &hypothesis);
 	int minLeds(bool tracking) const;
-	bool tryAssignment(const Eigen::Vector2d q[4], const Eigen::Vector2d uv[4],
-			   const Eigen::Matrix2d cov[4], std::size_t f, const int vertex[4]);
+	/*
+	 * Calls visit(j) for each usable candidate j whose column is within
+	 * gate_px of u_px, left to right, until it returns true (then true).
+	 */
+	template<typename Visit>
+	bool forCandidatesNear(double u_px, double gate_px, Visit &&visit) const
+	{
+		const auto first =
+			std::lower_bound(u_sorted_.begin(), u_sorted_.end(), u_px - gate_px);
+		for (auto it = first; it != u_sorted_.end() && *it <= u_px + gate_px; ++it)
+			if (visit(static_cast<int>(
+				    by_u_[static_cast<std::size_t>(it - u_sorted_.begin())])))
+				return true;
+		return false;
+	}
+	int triangleLeds() const;
+	/* Where a quadrilateral's diagonals cross, and how far perspective may move it. */
+	struct QuadInvariant {
+		double s = 0.0, t = 0.0;
+		double tol_s = 0.0, tol_t = 0.0;
+	};
+	bool quadInvariant(const Eigen::Vector2d q[4], QuadInvariant *invariant) const;
+	bool screenQuad(const QuadInvariant &invariant, std::size_t f, const int vertex[4]) const;
+	/* A face's vertices in one of its 8 cyclic assignments, and what quadShape() needs of them. */
+	struct QuadAssignment {
+		std::array<int, 4> vertex{}; /* image point k on face-local vertex[k] */
+		std::array<double, 4> area{}; /* signed areas A_(m) of the other three vertices */
+		std::array<double, 6>
+			side{}; /* side lengths, pairs (0,1) (0,2) (0,3) (1,2) (1,3) (2,3) */
+		double sides2 = 0.0; /* sum of their squares */
+	};
+	void findQuadAssignments();
+	static void quadDeterminants(const Eigen::Vector2d q[4], double D[4]);
+	bool quadShape(const Eigen::Vector2d q[4], const double D[4], std::size_t f,
+		       int assignment) const;
+	bool tryAssignment(const int candidate[4], std::size_t f, const int vertex[4]);
 	bool verify(const Pose &pose, std::size_t f, const Eigen::Vector3d model[4],
 		    const Eigen::Vector2d uv[4], const Eigen::Matrix2d cov[4]);
-	bool tryTriangle(const Eigen::Vector3d model[3], const Eigen::Vector2d q[3], std::size_t f,
-			 std::uint32_t own_leds, std::uint64_t own_candidates);
+	/* Three vertices of a face whose fourth is hidden, as the triangle search tries them. */
+	struct TriangleModel {
+		std::size_t face = 0;
+		std::array<int, 3> vertex{}; /* face-local, in the order of the image points */
+		std::uint32_t leds = 0; /* bit mask */
+		std::array<Eigen::Vector3d, 3> model_mm;
+		std::array<double, 3> sides_mm2{}; /* p3pSides() */
+		int sides_class = 0; /* index of the first model triangle with these sides */
+	};
+	static constexpr std::size_t kMaxTriangleModels = kMaxFaces * 8;
+	void findTriangleModels();
+	bool tryTriangle(const TriangleModel &triangle, const Eigen::Vector2d q[3],
+			 const P3pDepths &depths, std::uint64_t own_candidates);
 	bool moreLedsOnCandidates(const Pose &pose, double gate_px, std::uint32_t own_leds,
 				  std::uint64_t own_candidates, int needed) const;
 	static Pose mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t,
@@ -231,7 +278,6 @@ private:
 	void addCompetitors(const Hypothesis &chosen);
 	void findNeighbours();
 	std::uint64_t triangleNeighbours(int a) const;
-	bool screenQuad(const Eigen::Vector2d q[4], std::size_t f, const int vertex[4]) const;
 	bool searchQuads();
 	bool searchTriangles();
 	bool fullSearch(const Pose *reference, CorrespondenceResult *result);
@@ -270,6 +316,12 @@ private:
 	 * competitors.
 	 */
 	StaticVector<Pose, 8 * kMaxFaces * kMaxFaces> congruences_;
+	StaticVector<TriangleModel, kMaxTriangleModels> triangle_models_;
+	StaticVector<std::array<QuadAssignment, 8>, kMaxFaces> quad_assignments_;
+	/* P3P depths of the current image triangle, per ray order and side class (valid when stamped). */
+	std::array<std::array<P3pDepths, kMaxTriangleModels>, 3> depths_{};
+	std::array<std::array<std::uint32_t, kMaxTriangleModels>, 3> depth_stamps_{};
+	std::uint32_t depth_stamp_ = 0;
 
 	/* Per-frame scratch (sized here, reused). */
 	StaticVector<Eigen::Vector2d, kMaxCandidates> px_;
@@ -279,6 +331,9 @@ private:
 	StaticVector<Eigen::Matrix2d, kMaxCandidates> cov_; /* centroid covariance, px^2 */
 	/* Usable candidates, strongest first, and each one's nearest neighbours (as bits and a list). */
 	std::array<int, kMaxCandidates> cand_{};
+	/* Usable candidates (px_ indices) sorted by column, and their columns. */
+	StaticVector<std::int8_t, kMaxCandidates> by_u_;
+	StaticVector<double, kMaxCandidates> u_sorted_;
 	int n_cand_ = 0;
 	std::array<std::uint64_t, kMaxCandidates> neighbour_bits_{};
 	std::array<std::array<std::int8_t, kMaxCandidates>, kMaxCandidates> neighbour_list_{};
@@ -290,6 +345,7 @@ private:
 	int hypotheses_ = 0;
 	bool budget_hit_ = false;
 	int verified_ = 0;
+	int triangle_leds_ = 4; /* triangleLeds(), while the triangle search runs */
 };
 
 } /* namespace dockpose */

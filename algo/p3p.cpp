@@ -87,55 +87,40 @@ int quarticRoots(const double c[5], double roots[4])
 }
 
 /*
- * The rigid transform that takes the model triangle onto the camera-frame
- * triangle when the two are congruent (P3P's points meet the side lengths to
- * Newton's precision): orthonormal frames built on both triangles (first axis
- * along the first edge, third along the normal), R = F_c F_m^T, t through the
- * centroids. Exact for congruent triangles, where Horn's least squares would
- * give the same pose through a 4x4 eigen-solve; the caller checks the result
- * against the rays. False for a degenerate (collinear) triangle.
+ * An orthonormal frame on a triangle: first axis along the first edge, third
+ * along the normal. False for a degenerate (collinear) triangle.
  */
-bool triadFit(const Eigen::Vector3d model_mm[3], const Eigen::Vector3d camera_mm[3], Pose *pose)
+bool triangleFrame(const Eigen::Vector3d p[3], Eigen::Matrix3d *F)
 {
-	auto frame = [](const Eigen::Vector3d p[3], Eigen::Matrix3d *F) {
-		const Eigen::Vector3d a = p[1] - p[0], b = p[2] - p[0];
-		const Eigen::Vector3d n = a.cross(b);
-		const double na = a.norm(), nn = n.norm();
-		if (!(na > 0.0) || !(nn > 1e-12 * na * b.norm()))
-			return false;
-		const Eigen::Vector3d e1 = a / na, e3 = n / nn;
-		F->col(0) = e1;
-		F->col(1) = e3.cross(e1);
-		F->col(2) = e3;
-		return true;
-	};
-	Eigen::Matrix3d Fm, Fc;
-	if (!frame(model_mm, &Fm) || !frame(camera_mm, &Fc))
+	const Eigen::Vector3d a = p[1] - p[0], b = p[2] - p[0];
+	const Eigen::Vector3d n = a.cross(b);
+	const double na = a.norm(), nn = n.norm();
+	if (!(na > 0.0) || !(nn > 1e-12 * na * b.norm()))
 		return false;
-	pose->R = Fc * Fm.transpose();
-	const Eigen::Vector3d m_bar = (model_mm[0] + model_mm[1] + model_mm[2]) / 3.0;
-	const Eigen::Vector3d c_bar = (camera_mm[0] + camera_mm[1] + camera_mm[2]) / 3.0;
-	pose->t_mm = c_bar - pose->R * m_bar;
+	const Eigen::Vector3d e1 = a / na, e3 = n / nn;
+	F->col(0) = e1;
+	F->col(1) = e3.cross(e1);
+	F->col(2) = e3;
 	return true;
 }
 
 } /* namespace */
 
-int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pose poses[4])
+void solveP3pDepths(const Eigen::Vector2d xy[3], const double sides_mm2[3], P3pDepths *out)
 {
-	Eigen::Vector3d j[3];
+	out->n = 0;
+	Eigen::Vector3d *j = out->ray;
 	for (int i = 0; i < 3; ++i)
 		j[i] = Eigen::Vector3d(xy[i].x(), xy[i].y(), 1.0).normalized();
 	/* Haralick's notation: a, b, c the sides opposite points 1, 2, 3; alpha, beta, gamma the ray angles. */
-	const double a2 = (model_mm[1] - model_mm[2]).squaredNorm();
-	const double b2 = (model_mm[0] - model_mm[2]).squaredNorm();
-	const double c2 = (model_mm[0] - model_mm[1]).squaredNorm();
+	const double a2 = sides_mm2[0], b2 = sides_mm2[1], c2 = sides_mm2[2];
 	const double scale2 = std::max({ a2, b2, c2 });
 	if (!(b2 > 1e-12 * scale2) || !(a2 > 1e-12 * scale2) || !(c2 > 1e-12 * scale2))
-		return 0;
-	if ((model_mm[1] - model_mm[0]).cross(model_mm[2] - model_mm[0]).squaredNorm() <
-	    1e-8 * scale2 * scale2)
-		return 0;
+		return;
+	/* Collinear (Heron: 16 area^2 = 2(a2 b2 + b2 c2 + c2 a2) - a2^2 - b2^2 - c2^2). */
+	const double area16 = 2.0 * (a2 * b2 + b2 * c2 + c2 * a2) - a2 * a2 - b2 * b2 - c2 * c2;
+	if (!(area16 >= 4.0 * 1e-8 * scale2 * scale2))
+		return;
 	const double ca = j[1].dot(j[2]), cb = j[0].dot(j[2]), cg = j[0].dot(j[1]);
 	const double amc = (a2 - c2) / b2, apc = (a2 + c2) / b2;
 	const double c_b = c2 / b2, a_b = a2 / b2, bmc = (b2 - c2) / b2, bma = (b2 - a2) / b2;
@@ -149,11 +134,10 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 		4.0 * (-amc * (1.0 + amc) * cb + 2.0 * a_b * cg * cg * cb - (1.0 - apc) * ca * cg);
 	coef[0] = (1.0 + amc) * (1.0 + amc) - 4.0 * a_b * cg * cg;
 	if (!(std::abs(coef[4]) > 1e-12 * (std::abs(coef[0]) + std::abs(coef[2]) + 1e-300)))
-		return 0;
+		return;
 
 	double roots[4];
 	const int nr = quarticRoots(coef, roots);
-	int n = 0;
 	for (int r = 0; r < nr; ++r) {
 		const double v = roots[r];
 		const double den = 2.0 * (cg - v * ca);
@@ -171,14 +155,14 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 		s[2] = v * s[0];
 		/* Newton on the three side equations polishes the depths. */
 		const double cosines[3] = { ca, cb, cg }; /* ray pairs (1,2), (0,2), (0,1) */
-		const double sides[3] = { a2, b2, c2 };
 		const int pi[3] = { 1, 0, 0 }, pj[3] = { 2, 2, 1 };
 		for (int it = 0; it < 3; ++it) {
 			Eigen::Matrix3d J = Eigen::Matrix3d::Zero();
 			Eigen::Vector3d f;
 			for (int e = 0; e < 3; ++e) {
 				const double si = s[pi[e]], sj = s[pj[e]];
-				f(e) = si * si + sj * sj - 2.0 * si * sj * cosines[e] - sides[e];
+				f(e) = si * si + sj * sj - 2.0 * si * sj * cosines[e] -
+				       sides_mm2[e];
 				J(e, pi[e]) = 2.0 * si - 2.0 * sj * cosines[e];
 				J(e, pj[e]) = 2.0 * sj - 2.0 * si * cosines[e];
 			}
@@ -194,19 +178,52 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 		}
 		if (!(s[0] > 0.0 && s[1] > 0.0 && s[2] > 0.0))
 			continue;
+		for (int i = 0; i < 3; ++i)
+			out->depth_mm[out->n][i] = s[i];
+		++out->n;
+	}
+}
+
+/*
+ * The rigid transform that takes the model triangle onto each camera-frame
+ * triangle of the depths (congruent to it, to Newton's precision): with
+ * frames built alike on both, R = F_c F_m^T, t through the centroids. Exact
+ * for congruent triangles, where Horn's least squares would give the same
+ * pose through a 4x4 eigen-solve; each result is checked against the rays.
+ */
+int p3pPoses(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3],
+	     const P3pDepths &depths, Pose poses[4])
+{
+	Eigen::Matrix3d Fm;
+	if (depths.n == 0 || !triangleFrame(model_mm, &Fm))
+		return 0;
+	const Eigen::Matrix3d FmT = Fm.transpose();
+	const Eigen::Vector3d m_bar = (model_mm[0] + model_mm[1] + model_mm[2]) / 3.0;
+	double fit2[3];
+	for (int i = 0; i < 3; ++i) {
+		const double tol = 1e-7 * (1.0 + xy[i].norm());
+		fit2[i] = tol * tol;
+	}
+	int n = 0;
+	for (int r = 0; r < depths.n; ++r) {
 		Eigen::Vector3d camera_mm[3];
 		for (int i = 0; i < 3; ++i)
-			camera_mm[i] = s[i] * j[i];
+			camera_mm[i] = depths.depth_mm[r][i] * depths.ray[i];
+		Eigen::Matrix3d Fc;
+		if (!triangleFrame(camera_mm, &Fc))
+			continue;
 		Pose pose;
-		if (!triadFit(model_mm, camera_mm, &pose) || !pose.R.allFinite() ||
-		    !pose.t_mm.allFinite())
+		pose.R = Fc * FmT;
+		const Eigen::Vector3d c_bar = (camera_mm[0] + camera_mm[1] + camera_mm[2]) / 3.0;
+		pose.t_mm = c_bar - pose.R * m_bar;
+		if (!pose.R.allFinite() || !pose.t_mm.allFinite())
 			continue;
 		/* An ill-conditioned root (rays nearly parallel) may not fit its rays: drop it. */
 		bool fits = true;
 		for (int i = 0; i < 3 && fits; ++i) {
 			const Eigen::Vector3d c = pose.apply(model_mm[i]);
 			fits = c.z() > 0.0 &&
-			       (c.head<2>() / c.z() - xy[i]).norm() <= 1e-7 * (1.0 + xy[i].norm());
+			       (c.head<2>() / c.z() - xy[i]).squaredNorm() <= fit2[i];
 		}
 		if (!fits)
 			continue;
@@ -220,6 +237,22 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 			poses[n++] = pose;
 	}
 	return n;
+}
+
+void p3pSides(const Eigen::Vector3d model_mm[3], double sides_mm2[3])
+{
+	sides_mm2[0] = (model_mm[1] - model_mm[2]).squaredNorm();
+	sides_mm2[1] = (model_mm[0] - model_mm[2]).squaredNorm();
+	sides_mm2[2] = (model_mm[0] - model_mm[1]).squaredNorm();
+}
+
+int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pose poses[4])
+{
+	double sides[3];
+	p3pSides(model_mm, sides);
+	P3pDepths depths;
+	solveP3pDepths(xy, sides, &depths);
+	return p3pPoses(model_mm, xy, depths, poses);
 }
 
 } /* namespace dockpose */

@@ -26,4 +26,22 @@ namespace dockpose {
  */
 int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pose poses[4]);
 
+/*
+ * The same in two steps, for several model triangles with equal sides seen
+ * along the same rays (a rectangular face's corners, congruent faces): the
+ * depths depend on the rays and the three side lengths only, so they are
+ * solved once and each model triangle needs only its rotation.
+ */
+struct P3pDepths {
+	Eigen::Vector3d ray[3]; /* unit rays through xy[] */
+	double depth_mm[4][3]; /* each solution's distance along each ray */
+	int n = 0;
+};
+/* Squared side lengths opposite model points 0, 1, 2 (mm^2): the key of the depths. */
+void p3pSides(const Eigen::Vector3d model_mm[3], double sides_mm2[3]);
+void solveP3pDepths(const Eigen::Vector2d xy[3], const double sides_mm2[3], P3pDepths *depths);
+/* solveP3p()'s poses from the depths solved for this model triangle's sides. */
+int p3pPoses(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3],
+	     const P3pDepths &depths, Pose poses[4]);
+
 } /* namespace dockpose */
