@@ -881,8 +881,11 @@ void Correspondence::canonicalise(const Pose *reference, Hypothesis *h) const
 		permuted.pairs.push_back({ static_cast<std::int8_t>(led), pair[1] });
 		permuted.led_mask |= 1u << led;
 	}
-	std::sort(permuted.pairs.begin(), permuted.pairs.end(),
-		  [](const auto &x, const auto &y) { return x[0] < y[0]; });
+	/* By LED, as matchPredicted() lists them (insertion: at most kMaxLeds). */
+	for (std::size_t i = 1; i < permuted.pairs.size(); ++i)
+		for (std::size_t j = i; j > 0 && permuted.pairs[j - 1][0] > permuted.pairs[j][0];
+		     --j)
+			std::swap(permuted.pairs[j - 1], permuted.pairs[j]);
 	Hypothesis moved = *h;
 	moved.match = permuted;
 	if (refineMatched(start, &moved, false)) {
@@ -969,8 +972,8 @@ void Correspondence::findQuadAssignments()
 		std::array<QuadAssignment, 8> table{};
 		for (int dir = -1; dir <= 1; dir += 2)
 			for (int rot = 0; rot < 4; ++rot) {
-				QuadAssignment &qa =
-					table[static_cast<std::size_t>(4 * (dir + 1) / 2 + rot)];
+				const int assignment = 4 * (dir + 1) / 2 + rot;
+				QuadAssignment &qa = table[static_cast<std::size_t>(assignment)];
 				Eigen::Vector2d plane[4];
 				for (int k = 0; k < 4; ++k) {
 					qa.vertex[k] = ((rot + dir * k) % 4 + 4) % 4;

@@ -106,8 +106,9 @@ bool triangleFrame(const Eigen::Vector3d p[3], Eigen::Matrix3d *F)
 
 } /* namespace */
 
-void solveP3pDepths(const Eigen::Vector2d xy[3], const double sides_mm2[3], P3pDepths *out)
+void solveP3pDepths(const Eigen::Vector2d xy[3], const double sides_mm2[3], P3pDepths *depths)
 {
+	P3pDepths *out = depths;
 	out->n = 0;
 	Eigen::Vector3d *j = out->ray;
 	for (int i = 0; i < 3; ++i)
