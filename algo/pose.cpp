@@ -493,12 +493,18 @@ bool refinePose(const CameraModel &camera, const Eigen::Vector3d *model_mm,
 			}
 			const Pose candidate = applyStep(pose, delta);
 			Evaluation next;
-			/* Trial steps need only the error; the jacobian only once a step is taken. */
-			if (evaluate(camera, model_mm, pixels, n, candidate, false, weights,
+			/*
+			 * Trial steps need only the error; the jacobian only once a step
+			 * is taken. With per-point covariances the error needs each
+			 * point's projection jacobian anyway (the weights), so the trial
+			 * is evaluated whole at once rather than twice when taken.
+			 */
+			const bool whole = weights.pixel_cov != nullptr;
+			if (evaluate(camera, model_mm, pixels, n, candidate, whole, weights,
 				     &next) &&
 			    next.cost < ev.cost &&
-			    evaluate(camera, model_mm, pixels, n, candidate, true, weights,
-				     &next)) {
+			    (whole || evaluate(camera, model_mm, pixels, n, candidate, true,
+					       weights, &next))) {
 				const double decrease = ev.cost - next.cost;
 				const bool small_step = delta.head<3>().norm() <=
 								1e-10 * (1.0 + pose.t_mm.norm()) &&
