@@ -230,11 +230,68 @@ bool solveFourCoplanar(const Eigen::Vector3d model_mm[4], const Eigen::Vector2d 
 	for (Eigen::Vector3d &p : P)
 		p *= scale;
 
-	/* Rigid fit of the model to the reconstructed points. */
-	Pose fit;
-	double sse = 0.0;
-	if (!hornFit(model_mm, P, 4, &fit, false, nullptr, &sse))
+	/*
+	 * Rigid fit of the model to the reconstructed points. Both sets are
+	 * planar (the reconstruction is, to its centroids' noise), so Horn's
+	 * 4x4 eigen-solve reduces to its closed form for planes: the rotation
+	 * takes the model's normal onto the points' (the same signed sum of
+	 * the four triangles' cross products, whose signs a rotation keeps) and
+	 * then turns the plane by the angle that best aligns the in-plane
+	 * coordinates (2-D Procrustes); the translation joins the centroids.
+	 */
+	Eigen::Vector3d normal_p = Eigen::Vector3d::Zero();
+	for (int m = 0; m < 4; ++m) {
+		const Eigen::Vector3d &pi = P[kOmit[m][0]];
+		const Eigen::Vector3d cp = (P[kOmit[m][1]] - pi).cross(P[kOmit[m][2]] - pi);
+		normal_p += c[m].dot(c[best]) >= 0.0 ? cp : Eigen::Vector3d(-cp);
+	}
+	const double normal_p_norm = normal_p.norm();
+	if (!(normal_p_norm > 0.0))
 		return false;
+	normal_p /= normal_p_norm;
+	const Eigen::Vector3d m_bar =
+		0.25 * (model_mm[0] + model_mm[1] + model_mm[2] + model_mm[3]);
+	const Eigen::Vector3d p_bar = 0.25 * (P[0] + P[1] + P[2] + P[3]);
+	/* In-plane axes: the first along the first point's offset, the second normal x first. */
+	auto axes = [](const Eigen::Vector3d &n, const Eigen::Vector3d &d, Eigen::Vector3d *e1,
+		       Eigen::Vector3d *e2) {
+		const Eigen::Vector3d in_plane = d - d.dot(n) * n;
+		const double len = in_plane.norm();
+		if (!(len > 0.0))
+			return false;
+		*e1 = in_plane / len;
+		*e2 = n.cross(*e1);
+		return true;
+	};
+	Eigen::Vector3d e1_m, e2_m, e1_p, e2_p;
+	if (!axes(normal, model_mm[0] - m_bar, &e1_m, &e2_m) ||
+	    !axes(normal_p, P[0] - p_bar, &e1_p, &e2_p))
+		return false;
+	double sum_cross = 0.0, sum_dot = 0.0;
+	for (int i = 0; i < 4; ++i) {
+		const Eigen::Vector3d dm = model_mm[i] - m_bar, dp = P[i] - p_bar;
+		const double ax = dm.dot(e1_m), ay = dm.dot(e2_m);
+		const double bx = dp.dot(e1_p), by = dp.dot(e2_p);
+		sum_cross += ax * by - ay * bx;
+		sum_dot += ax * bx + ay * by;
+	}
+	const double turn = std::hypot(sum_cross, sum_dot);
+	if (!(turn > 0.0))
+		return false;
+	const double cos_a = sum_dot / turn, sin_a = sum_cross / turn;
+	Eigen::Matrix3d to, from;
+	to.col(0) = cos_a * e1_p + sin_a * e2_p;
+	to.col(1) = -sin_a * e1_p + cos_a * e2_p;
+	to.col(2) = normal_p;
+	from.col(0) = e1_m;
+	from.col(1) = e2_m;
+	from.col(2) = normal;
+	Pose fit;
+	fit.R = to * from.transpose();
+	fit.t_mm = p_bar - fit.R * m_bar;
+	double sse = 0.0;
+	for (int i = 0; i < 4; ++i)
+		sse += (fit.apply(model_mm[i]) - P[i]).squaredNorm();
 	if (!fit.R.allFinite() || !fit.t_mm.allFinite() || !std::isfinite(sse))
 		return false;
 	*pose = fit;

@@ -47,8 +47,9 @@ double rotationAngleDeg(const Eigen::Matrix3d &a, const Eigen::Matrix3d &b);
  *
  * The points are in corresponding order (model_mm[i] <-> xy[i]). Depths follow
  * Z_m ∝ D_(m) / A_(m); the scale is the least-squares fit of the six pairwise
- * distances; the rotation and translation are Horn's fit of the model to the
- * reconstructed camera-frame points.
+ * distances; the rotation and translation are the rigid fit of the model to
+ * the reconstructed camera-frame points (Horn's, in its closed form for two
+ * planar sets: normals aligned, then the best in-plane turn).
  *
  * Returns false (and says nothing else) when the face is unusable: a
  * near-collinear triangle (|D| or |A| tiny), depths of mixed sign (the order
