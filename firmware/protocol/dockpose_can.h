@@ -1035,7 +1035,7 @@ public:
 	explicit Decoder(std::uint32_t base_id = kDefaultBaseId)
 		: base_id_(base_id)
 	{
-		group_.reset(base_id_);
+		resetGroup();
 	}
 
 	/* A frame from the bus, undated (no freshness check). */
@@ -1210,7 +1210,21 @@ private:
 			if (held_ != Held::None &&
 			    !(offset == kFreshness && held_ == Held::Heartbeat))
 				dropGroup();
+			/*
+			 * A frame that cannot belong to the open group: the rest of that
+			 * group never came (the sensor drops what misses its deadline,
+			 * and a report cut short leaves its first frames on the bus), so
+			 * its frames must not spoil the next group's MAC.
+			 */
+			else if (group_kind_ != GroupKind::None && !continuesGroup(offset, seq)) {
+				++counters_.unauthenticated;
+				resetGroup();
+			}
 			group_.add(frame);
+			group_kind_ = offset == kHeartbeat || offset == kFreshness
+					      ? GroupKind::Heartbeat
+					      : GroupKind::Report;
+			group_seq_ = seq;
 		}
 		if (!mac_ && (offset == kAuth || offset == kFreshness || offset == kCommandAuth))
 			return Event::None; /* a keyless receiver ignores the MACs */
@@ -1382,7 +1396,7 @@ private:
 		have_high_ = false;
 		/* The group is checked as it is now; the next one starts empty. */
 		detail::MacInput input = group_;
-		group_.reset(base_id_);
+		resetGroup();
 		if (held == Held::None || overflow)
 			return reject(FrameError::Unauthenticated, &counters_.unauthenticated);
 
@@ -1438,13 +1452,32 @@ private:
 		return Event::Command;
 	}
 
+	/*
+	 * Can a sensor frame continue the open group? A heartbeat starts one (its
+	 * DP_Freshness continues it); a report's frames share its sequence.
+	 */
+	bool continuesGroup(std::uint32_t offset, std::uint8_t seq) const
+	{
+		if (offset == kHeartbeat)
+			return false;
+		if (offset == kFreshness)
+			return group_kind_ == GroupKind::Heartbeat;
+		return group_kind_ == GroupKind::Report && seq == group_seq_;
+	}
+
+	void resetGroup()
+	{
+		group_.reset(base_id_);
+		group_kind_ = GroupKind::None;
+	}
+
 	void dropGroup()
 	{
 		if (held_ != Held::None)
 			++counters_.unauthenticated;
 		held_ = Held::None;
 		have_high_ = false;
-		group_.reset(base_id_);
+		resetGroup();
 	}
 
 public:
@@ -1550,6 +1583,14 @@ private:
 	/* Authentication. */
 	MacFunction *mac_ = nullptr;
 	detail::MacInput group_;
+	/* What the open group holds: nothing yet, a report's frames (of group_seq_), a heartbeat's. */
+	enum class GroupKind : std::uint8_t {
+		None,
+		Report,
+		Heartbeat
+	};
+	GroupKind group_kind_ = GroupKind::None;
+	std::uint8_t group_seq_ = 0;
 	Held held_ = Held::None;
 	StatusData held_status_;
 	std::uint8_t held_seq_ = 0;

@@ -7,7 +7,10 @@ the DBC; the MAC is AES-128-CMAC from python3-cryptography (OpenSSL, but
 another binding and none of dockpose_can.h); the grouping and the MAC input
 are rebuilt from docs/can-protocol.md ("Authentication"):
 
-  sensor frames since the previous DP_Auth form its group; DP_Auth's MAC is the
+  sensor frames since the previous DP_Auth form its group, but a frame that cannot
+  continue the group (a DP_Heartbeat; a report frame of another sequence, or after
+  a heartbeat's frames) starts a new one: the rest of the old group never came (a
+  report cut short at its deadline), and it is dropped unverified; DP_Auth's MAC is the
   first 4 bytes of CMAC(key, b"DPA3" | base id (2 bytes LE) | per frame: id
   (2 bytes LE) + its 8 data bytes | freshness (8 bytes LE) | DP_Auth's byte 6);
   the freshness value is (DP_Freshness.FreshnessHigh << 16 | AuthFreshness) when
@@ -69,6 +72,7 @@ def main():
 	result = {"auth_ok": 0, "auth_bad": 0, "unsynced": 0, "command_ok": 0, "command_bad": 0,
 			  "bad_lines": []}
 	group = []
+	kind, group_seq = None, None
 	high = None
 	last = None
 	command = None
@@ -106,7 +110,7 @@ def main():
 						fv += 0x10000
 				else:
 					result["unsynced"] += 1
-					group, high = [], None
+					group, high, kind = [], None, None
 					continue
 				if mac32(mac_input(group, fv, data[6])) == s["AuthMac"] and (last is None or fv > last):
 					result["auth_ok"] += 1
@@ -114,9 +118,19 @@ def main():
 				else:
 					result["auth_bad"] += 1
 					result["bad_lines"].append(number)
-				group, high = [], None
+				group, high, kind = [], None, None
 			else:
+				seq = data[6] >> 4
+				if name == "DP_Heartbeat":
+					this, continues = "heartbeat", False
+				elif name == "DP_Freshness":
+					this, continues = "heartbeat", kind == "heartbeat"
+				else:
+					this, continues = "report", kind == "report" and seq == group_seq
+				if group and not continues:
+					group, high = [], None
 				group.append((ident, data))
+				kind, group_seq = this, seq
 				if name == "DP_Freshness":
 					high = decode(name, data)["FreshnessHigh"]
 	print(json.dumps(result))

@@ -568,6 +568,16 @@ TEST_F(CommandAuthTest, CanmatrixAndAnotherCmacAgreeWithTheMacs)
 		if (i % 6 == 0)
 			put(frames, heartbeat(frames));
 		const int n = report(300 + i, frames);
+		if (i == 47 || i == 52) {
+			/*
+			 * Cut short: the sensor sent its first four frames, the rest missed
+			 * their deadline (a stalled guest in the VM tests). A heartbeat
+			 * (after 47) or the next report (after 52) follows; neither MAC may
+			 * take the orphans in.
+			 */
+			put(frames, 4);
+			continue;
+		}
 		if (i == 40) {
 			frames[2].data[3] ^= 0x10; /* a quaternion bit, CRC made right */
 			frames[2] = withCrc(frames[2]);
@@ -597,12 +607,17 @@ TEST_F(CommandAuthTest, CanmatrixAndAnotherCmacAgreeWithTheMacs)
 	const int status = ::pclose(pipe);
 	std::filesystem::remove_all(dir);
 	ASSERT_EQ(status, 0) << out;
-	/* 10 heartbeat groups and 59 good reports verify; the tampered one and nothing else fails. */
-	EXPECT_EQ(out, "{\"auth_ok\": 69, \"auth_bad\": 1, \"unsynced\": 0, \"command_ok\": 1, "
+	/*
+	 * 10 heartbeat groups and 57 good reports verify; the tampered one and nothing else
+	 * fails; the two reports cut short never had a MAC.
+	 */
+	EXPECT_EQ(out, "{\"auth_ok\": 67, \"auth_bad\": 1, \"unsynced\": 0, \"command_ok\": 1, "
 		       "\"command_bad\": 0, \"bad_lines\": [" +
 			       std::to_string(tampered_line) + "]}\n");
 	EXPECT_EQ(controller_.counters().auth_failures, 1u) << "the C++ decoder agrees";
-	EXPECT_EQ(controller_.counters().valid_poses, 59u);
+	EXPECT_EQ(controller_.counters().valid_poses, 57u);
+	/* The two reports cut short, and the arm's command (a controller's decoder takes none). */
+	EXPECT_EQ(controller_.counters().unauthenticated, 3u);
 }
 
 } /* namespace */
