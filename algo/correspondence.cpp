@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <utility>
@@ -452,18 +453,18 @@ int Correspondence::matchPredicted(const Pose &pose, double gate_px, Match *matc
 }
 
 /*
- * Do at least `needed` LEDs other than own_leds, predicted by the pose on a
- * face that faces the camera and inside the frame, each have a usable
- * candidate other than own_candidates within gate_px? An upper bound of what
- * matchPredicted() adds to a P3P pose's three points (two LEDs may claim one
- * candidate here), computed only until the answer is known: the screen before
- * a triangle's pose is verified.
+ * The LEDs other than own_leds, predicted by the pose on a face that faces
+ * the camera and inside the frame, that have a usable candidate other than
+ * own_candidates within gate_px: how many, and for each the smallest
+ * centroid variance (major axis, px^2) among its candidates there, appended
+ * to var_px2. An upper bound of what matchPredicted() adds to a P3P pose's
+ * three points (two LEDs may claim one candidate here): the screen before a
+ * triangle's pose is verified.
  */
-bool Correspondence::moreLedsOnCandidates(const Pose &pose, double gate_px, std::uint32_t own_leds,
-					  std::uint64_t own_candidates, int needed) const
+int Correspondence::moreLedsOnCandidates(const Pose &pose, double gate_px, std::uint32_t own_leds,
+					 std::uint64_t own_candidates,
+					 StaticVector<double, kMaxLeds> *var_px2) const
 {
-	if (needed <= 0)
-		return true;
 	const std::uint32_t front = frontLeds(pose) & ~own_leds;
 	const double gate2 = gate_px * gate_px;
 	int found = 0;
@@ -474,14 +475,44 @@ bool Correspondence::moreLedsOnCandidates(const Pose &pose, double gate_px, std:
 		if (!camera_.project(pose.apply(target_.points_mm[i]), &uv) ||
 		    !camera_.inImage(uv, -gate_px))
 			continue;
-		const bool hit = forCandidatesNear(uv.x(), gate_px, [&](int j) {
-			return !(own_candidates & (std::uint64_t{ 1 } << j)) &&
-			       (px_[j] - uv).squaredNorm() < gate2;
+		double var = std::numeric_limits<double>::max();
+		forCandidatesNear(uv.x(), gate_px, [&](int j) {
+			if (!(own_candidates & (std::uint64_t{ 1 } << j)) &&
+			    (px_[j] - uv).squaredNorm() < gate2)
+				var = std::min(var, var_[j]);
+			return false;
 		});
-		if (hit && ++found >= needed)
-			return true;
+		if (var == std::numeric_limits<double>::max())
+			continue;
+		++found;
+		if (!var_px2->full())
+			var_px2->push_back(var);
 	}
-	return false;
+	return found;
+}
+
+/*
+ * The smallest log10 NFA (log10Nfa()) a triangle's pose could reach with
+ * the LEDs whose candidates have these centroid variances: every tolerance
+ * at its floor (twice the centroid's sigma), the density the frame's
+ * candidates alone give, every combinatorial factor at 1. Allocates: never.
+ */
+double Correspondence::log10NfaFloor(StaticVector<double, kMaxLeds> var_px2) const
+{
+	const int k = static_cast<int>(var_px2.size());
+	if (k < 4)
+		return 0.0;
+	std::sort(var_px2.begin(), var_px2.end());
+	const CameraIntrinsics &intr = camera_.intrinsics();
+	const double rho = n_cand_ / (static_cast<double>(intr.width) * intr.height);
+	double floor = std::numeric_limits<double>::max();
+	for (int m = 4; m <= k; ++m) {
+		const double p =
+			-std::expm1(-rho * kPi * 4.0 * var_px2[static_cast<std::size_t>(m - 1)]);
+		floor = std::min(floor,
+				 log10_triangle_tests_ + (m - 3) * std::log10(std::max(p, 1e-300)));
+	}
+	return floor;
 }
 
 /* Refine over the hypothesis's current matches (the covariance only when asked for). */
@@ -760,6 +791,15 @@ bool Correspondence::rival(const Hypothesis &other, const Hypothesis &chosen) co
 	       other.refined.converged && plausible(other.refined.pose) &&
 	       other.log10_nfa <=
 		       std::max(config_.max_log10_nfa, chosen.log10_nfa + config_.ambiguity_margin);
+}
+
+/*
+ * The largest log10 NFA of a hypothesis that can still matter: acceptable,
+ * or a rival of an accepted pose (rival(): within ambiguity_margin of it).
+ */
+double Correspondence::rivalLog10Nfa() const
+{
+	return config_.max_log10_nfa + std::max(config_.ambiguity_margin, 0.0);
 }
 
 /* Acceptable first; then more LEDs explained; then fewer false alarms; then lower error. */
@@ -1291,8 +1331,12 @@ bool Correspondence::tryTriangle(const TriangleModel &triangle, const Eigen::Vec
 		 * pull the refinement off the target.
 		 */
 		const double gate = gatePx(pose);
-		if (!moreLedsOnCandidates(pose, gate, own_leds, own_candidates,
-					  triangle_leds_ - 3) ||
+		StaticVector<double, kMaxLeds> var_px2;
+		for (std::uint64_t bits = own_candidates; bits != 0; bits &= bits - 1)
+			var_px2.push_back(var_[static_cast<std::size_t>(std::countr_zero(bits))]);
+		if (moreLedsOnCandidates(pose, gate, own_leds, own_candidates, &var_px2) <
+			    triangle_leds_ - 3 ||
+		    log10NfaFloor(var_px2) > rivalLog10Nfa() ||
 		    verified_ >= config_.max_verifications)
 			continue;
 		++verified_;

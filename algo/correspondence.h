@@ -268,8 +268,11 @@ private:
 	void findTriangleModels();
 	bool tryTriangle(const TriangleModel &triangle, const Eigen::Vector2d q[3],
 			 const P3pDepths &depths, std::uint64_t own_candidates);
-	bool moreLedsOnCandidates(const Pose &pose, double gate_px, std::uint32_t own_leds,
-				  std::uint64_t own_candidates, int needed) const;
+	int moreLedsOnCandidates(const Pose &pose, double gate_px, std::uint32_t own_leds,
+				 std::uint64_t own_candidates,
+				 StaticVector<double, kMaxLeds> *var_px2) const;
+	double log10NfaFloor(StaticVector<double, kMaxLeds> var_px2) const;
+	double rivalLog10Nfa() const;
 	static Pose mirrorPose(const Pose &pose, const Eigen::Vector3d &centre_t,
 			       const Eigen::Vector3d &normal_t);
 	double log10Nfa(const Hypothesis &hypothesis) const;
