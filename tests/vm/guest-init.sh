@@ -32,7 +32,10 @@ if [ "$DOCKPOSE_VM_ARCH" = arm64 ]; then
 	"$DOCKPOSE_VM_BUSYBOX" mount -t proc proc /proc
 	"$DOCKPOSE_VM_BUSYBOX" mount -t tmpfs -o mode=0755 tmpfs /run
 	"$DOCKPOSE_VM_BUSYBOX" mkdir -p /run/busybox/bin
-	"$DOCKPOSE_VM_BUSYBOX" --install -s /run/busybox/bin
+	# A copy in /run: the tools tree may lie in the host's /tmp (DOCKPOSE_VM_CACHE there), which
+	# the guest's own /tmp hides below until it is shown again.
+	"$DOCKPOSE_VM_BUSYBOX" cp "$DOCKPOSE_VM_BUSYBOX" /run/busybox/busybox
+	/run/busybox/busybox --install -s /run/busybox/bin
 	PATH=/run/busybox/bin
 else
 	PATH=/usr/sbin:/usr/bin:/sbin:/bin
@@ -79,9 +82,10 @@ mount -t configfs configfs /sys/kernel/config || setup_failed "cannot mount conf
 # (read-only) at /run/host-tmp, and mount the share after the tmpfs.
 mkdir -p /run/host-tmp && mount -o bind /tmp /run/host-tmp &&
 	mount -t tmpfs -o mode=1777 tmpfs /tmp || setup_failed "cannot mount /tmp"
-# The repository (scripts, test data, binaries) and the working directory, when they live in the
-# host's /tmp (a checkout there, a build tree there): show them (read-only) at their own paths.
-for dir in "$VM_REPO" "$VM_CWD"; do
+# The repository (scripts, test data, binaries), the working directory and the arm64 tools tree,
+# when they live in the host's /tmp (a checkout there, a build tree there, a cache there): show
+# them (read-only) at their own paths.
+for dir in "$VM_REPO" "$VM_CWD" "${VM_USERLAND:-}"; do
 	case $dir in
 	"" | /tmp) ;;
 	/tmp/*)
