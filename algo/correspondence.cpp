@@ -97,6 +97,18 @@ double log10Choose(int n, int k)
 
 } /* namespace */
 
+double bestSubsetLog10Nfa(const double *tol2_sorted, int k, int n, double rho, double log10_tests)
+{
+	double best = std::numeric_limits<double>::max();
+	for (int m = 4; m <= k; ++m) {
+		const double p = -std::expm1(-rho * kPi * tol2_sorted[m - 1]);
+		const double choose = n < 0 ? 0.0 : log10Choose(n - 3, m - 3);
+		best = std::min(best,
+				log10_tests + choose + (m - 3) * std::log10(std::max(p, 1e-300)));
+	}
+	return best;
+}
+
 Correspondence::Correspondence(TargetModel target, const CameraModel &camera,
 			       const CorrespondenceConfig &config)
 	: target_(std::move(target)),
@@ -503,16 +515,12 @@ double Correspondence::log10NfaFloor(StaticVector<double, kMaxLeds> var_px2) con
 	if (k < 4)
 		return 0.0;
 	std::sort(var_px2.begin(), var_px2.end());
+	std::array<double, kMaxLeds> tol2{};
+	for (int i = 0; i < k; ++i)
+		tol2[static_cast<std::size_t>(i)] = 4.0 * var_px2[static_cast<std::size_t>(i)];
 	const CameraIntrinsics &intr = camera_.intrinsics();
 	const double rho = n_cand_ / (static_cast<double>(intr.width) * intr.height);
-	double floor = std::numeric_limits<double>::max();
-	for (int m = 4; m <= k; ++m) {
-		const double p =
-			-std::expm1(-rho * kPi * 4.0 * var_px2[static_cast<std::size_t>(m - 1)]);
-		floor = std::min(floor,
-				 log10_triangle_tests_ + (m - 3) * std::log10(std::max(p, 1e-300)));
-	}
-	return floor;
+	return bestSubsetLog10Nfa(tol2.data(), k, -1, rho, log10_triangle_tests_);
 }
 
 /* Refine over the hypothesis's current matches (the covariance only when asked for). */
@@ -705,12 +713,7 @@ double Correspondence::log10Nfa(const Hypothesis &h) const
 	 */
 	const double tests = (h.from_triangle ? log10_triangle_tests_ : log10_quad_tests_) +
 			     std::log10(static_cast<double>(k - 3));
-	double search = std::numeric_limits<double>::max();
-	for (int m = 4; m <= k; ++m) {
-		const double p = -std::expm1(-rho * kPi * tol2[m - 1]);
-		search = std::min(search, tests + log10Choose(n - 3, m - 3) +
-						  (m - 3) * std::log10(std::max(p, 1e-300)));
-	}
+	const double search = bestSubsetLog10Nfa(tol2.data(), k, n, rho, tests);
 	if (!h.tracked)
 		return search;
 	/* The prediction's window: one test, every matched LED a chance hit in it. */
@@ -1320,6 +1323,9 @@ bool Correspondence::tryTriangle(const TriangleModel &triangle, const Eigen::Vec
 	const std::uint32_t own_leds = triangle.leds;
 	Pose poses[4];
 	const int n = p3pPoses(triangle.model_mm.data(), q, depths, poses);
+	StaticVector<double, kMaxLeds> own_var_px2;
+	for (std::uint64_t bits = own_candidates; bits != 0; bits &= bits - 1)
+		own_var_px2.push_back(var_[static_cast<std::size_t>(std::countr_zero(bits))]);
 	for (int k = 0; k < n; ++k) {
 		const Pose &pose = poses[k];
 		if (!faceVisible(pose, f) || !plausible(pose))
@@ -1331,9 +1337,7 @@ bool Correspondence::tryTriangle(const TriangleModel &triangle, const Eigen::Vec
 		 * pull the refinement off the target.
 		 */
 		const double gate = gatePx(pose);
-		StaticVector<double, kMaxLeds> var_px2;
-		for (std::uint64_t bits = own_candidates; bits != 0; bits &= bits - 1)
-			var_px2.push_back(var_[static_cast<std::size_t>(std::countr_zero(bits))]);
+		StaticVector<double, kMaxLeds> var_px2 = own_var_px2;
 		if (moreLedsOnCandidates(pose, gate, own_leds, own_candidates, &var_px2) <
 			    triangle_leds_ - 3 ||
 		    log10NfaFloor(var_px2) > rivalLog10Nfa() ||

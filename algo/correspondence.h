@@ -146,6 +146,17 @@ struct SolveContext {
 	int frame_candidates = 0; /* candidates (blobs) of the last whole-frame pass */
 };
 
+/*
+ * The NFA's evidence term (see above) for k >= 4 matched LEDs: min over m in
+ * 4..k of log10_tests + log10 C(n - 3, m - 3) + (m - 3) log10 p_m, p_m =
+ * 1 - exp(-rho pi tol2_sorted[m - 1]), with tol2_sorted the k squared
+ * tolerances (px^2) in increasing order and rho a density (px^-2); n < 0
+ * leaves out the factor C (as a floor). It grows with every tolerance, rho,
+ * log10_tests and n: a search screen that passes it the smallest of each
+ * bounds from below the log10 NFA a verified pose can reach. Allocates: never.
+ */
+double bestSubsetLog10Nfa(const double *tol2_sorted, int k, int n, double rho, double log10_tests);
+
 class Correspondence
 {
 public:

@@ -286,6 +286,48 @@ TEST(Correspondence, TheNfaBoundDecidesAcceptance)
 }
 
 /*
+ * The triangle search's screen (log10NfaFloor) passes bestSubsetLog10Nfa()
+ * the smallest of everything a verified pose's NFA uses: tolerances at twice
+ * the centroids' sigma, the frame's own density, the fewest tests and no
+ * factor C(n - 3, m - 3). Whatever a verification then measures at or above
+ * those (residuals, a denser neighbourhood, more tests, more predicted LEDs),
+ * its NFA is no smaller than the floor: the screen skips no pose that could
+ * be accepted or rival one. Random draws, and the floor reached exactly.
+ */
+TEST(Correspondence, TheNfaFloorBoundsEveryVerifiedNfa)
+{
+	std::mt19937 rng(17);
+	std::uniform_real_distribution<double> unit(0.0, 1.0);
+	for (int trial = 0; trial < 2000; ++trial) {
+		const int k = 4 + static_cast<int>(unit(rng) * (kMaxLeds - 3));
+		std::array<double, kMaxLeds> floor2{}, tol2{};
+		for (int i = 0; i < k; ++i) {
+			const double sigma_px = 0.02 + 2.0 * unit(rng) * unit(rng);
+			floor2[i] = 4.0 * sigma_px * sigma_px;
+			tol2[i] = floor2[i] * (1.0 + (unit(rng) < 0.3 ? 0.0 : 50.0 * unit(rng)));
+		}
+		std::sort(floor2.begin(), floor2.begin() + k);
+		std::sort(tol2.begin(), tol2.begin() + k);
+		const double rho = (1.0 + 63.0 * unit(rng)) / (1456.0 * 1088.0);
+		const double tests = 2.0 + 4.0 * unit(rng);
+		const double floor = bestSubsetLog10Nfa(floor2.data(), k, -1, rho, tests);
+		const int n = k + static_cast<int>(unit(rng) * 4.0);
+		const double nfa = bestSubsetLog10Nfa(tol2.data(), k, n, rho * (1.0 + unit(rng)),
+						      tests + std::log10(k - 3.0));
+		EXPECT_LE(floor, nfa + 1e-12) << "trial " << trial << ", k " << k;
+		/* At the floor's own inputs with n = k (C = 1 for m = k) nothing is lost. */
+		EXPECT_LE(bestSubsetLog10Nfa(floor2.data(), k, k, rho, tests),
+			  floor + 1e-12 + std::log10(static_cast<double>(1 << (k - 3))));
+	}
+	/* One term by hand: four LEDs, 0.1 px sigma, 20 candidates in a 1456x1088 frame. */
+	const double tol2[4] = { 0.04, 0.04, 0.04, 0.04 };
+	const double rho = 20.0 / (1456.0 * 1088.0);
+	const double p = 1.0 - std::exp(-rho * 3.14159265358979323846 * 0.04);
+	EXPECT_NEAR(bestSubsetLog10Nfa(tol2, 4, -1, rho, 3.0), 3.0 + std::log10(p), 1e-9);
+	EXPECT_NEAR(bestSubsetLog10Nfa(tol2, 4, 9, rho, 3.0), 3.0 + std::log10(6.0 * p), 1e-9);
+}
+
+/*
  * The same LEDs among more clutter are weaker evidence: the density of unmatched
  * points enters the NFA, so the accepted pose's log10 NFA rises (towards the
  * bound) as clutter is added around it.
