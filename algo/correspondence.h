@@ -86,7 +86,11 @@ struct CorrespondenceConfig {
 	double max_log10_nfa = -4.0;
 	/* A competitor within this many decades of the chosen pose's NFA makes it ambiguous. */
 	double ambiguity_margin = 3.0;
-	/* Stop the search once a verified pose is this certain. */
+	/*
+	 * Stop the search once a verified pose is this certain; never above
+	 * max_log10_nfa - ambiguity_margin, where a rival the stop leaves unsought
+	 * would itself be within the acceptance bound (Correspondence applies it).
+	 */
 	double early_exit_log10_nfa = -8.0;
 	/* Floors: LEDs a pose must rest on, from the full search and from tracking. */
 	int min_leds_search = 4;
@@ -302,6 +306,8 @@ private:
 	double diameter_mm_ = 0.0;
 	/* cos and tan of config_.max_view_angle_deg (tan of at most 89 degrees). */
 	double cos_view_max_ = 0.0;
+	/* config_.early_exit_log10_nfa, at most max_log10_nfa - ambiguity_margin. */
+	double early_exit_log10_nfa_ = 0.0;
 	double tan_view_max_ = 0.0;
 	Eigen::Vector3d centroid_mm_ = Eigen::Vector3d::Zero();
 	/* Front normals of the faces (TargetModel::frontNormals). */

@@ -43,10 +43,7 @@ PipelineConfig pipelineConfig(const PipelineSection &section)
 	PipelineConfig config;
 	config.tracking = section.mode == TrackMode::Track;
 	config.correspondence.max_rms_px = section.max_rms_px;
-	config.correspondence.max_log10_nfa = section.max_log10_nfa;
-	/* The early exit never accepts more than the bound does. */
-	config.correspondence.early_exit_log10_nfa =
-		std::min(config.correspondence.early_exit_log10_nfa, section.max_log10_nfa);
+	config.correspondence.max_log10_nfa = section.max_log10_nfa; /* the early exit follows */
 	config.correspondence.min_leds_search = section.min_leds_search;
 	config.correspondence.min_leds_track = section.min_leds_track;
 	config.full_frame_every = section.full_frame_every;

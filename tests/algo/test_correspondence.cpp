@@ -163,6 +163,41 @@ TEST(Correspondence, FindsPoseWithClutterAndHiddenLed)
 }
 
 /*
+ * The early exit leaves rivals unsought, so it never sits above
+ * max_log10_nfa - ambiguity_margin, whatever is configured: an early exit
+ * configured at +5 stops the search exactly where one at that limit does, and
+ * a wider ambiguity margin makes the search go on longer, never shorter.
+ */
+TEST(Correspondence, TheEarlyExitStaysAMarginBelowTheBound)
+{
+	std::mt19937 rng(19);
+	const CameraModel cam(cam1456());
+	const TargetModel m = corner();
+	int stopped_sooner = 0;
+	for (int t = 0; t < 8; ++t) {
+		const Pose truth = makePose(6 - 2 * t, 4 + t, 10 * t, 15, -20, 700 + 150 * t);
+		auto blobs = observe(m, cam, truth, 0, 16, 0.1, rng);
+		CorrespondenceConfig limit, careless, wide;
+		limit.early_exit_log10_nfa = limit.max_log10_nfa - limit.ambiguity_margin;
+		careless.early_exit_log10_nfa = 5.0;
+		wide.early_exit_log10_nfa = 5.0;
+		wide.ambiguity_margin = 12.0;
+		CorrespondenceResult rl, rc, rw;
+		const bool fl = Correspondence(m, cam, limit).solve(blobs, nullptr, &rl);
+		const bool fc = Correspondence(m, cam, careless).solve(blobs, nullptr, &rc);
+		Correspondence(m, cam, wide).solve(blobs, nullptr, &rw);
+		ASSERT_TRUE(fl) << "trial " << t;
+		EXPECT_EQ(fl, fc) << "trial " << t;
+		EXPECT_EQ(rl.hypotheses, rc.hypotheses) << "trial " << t;
+		EXPECT_EQ(rl.log10_nfa, rc.log10_nfa) << "trial " << t;
+		EXPECT_LE(rl.hypotheses, rw.hypotheses) << "trial " << t;
+		stopped_sooner += rl.hypotheses < rw.hypotheses;
+	}
+	/* The test means something only where the exit did stop the search early. */
+	EXPECT_GE(stopped_sooner, 4);
+}
+
+/*
  * The box corner with its corner LED (shared by all three faces) hidden
  * leaves no face complete: only the triangle search can find the pose, and
  * it solves P3P only for the vertex order a face seen from its front shows.
@@ -272,9 +307,7 @@ TEST(Correspondence, TheNfaBoundDecidesAcceptance)
 			EXPECT_LE(r.log10_nfa, CorrespondenceConfig{}.max_log10_nfa)
 				<< m.name << " trial " << t;
 			CorrespondenceConfig strict;
-			strict.max_log10_nfa = r.log10_nfa - 1.0;
-			strict.early_exit_log10_nfa =
-				std::min(strict.early_exit_log10_nfa, strict.max_log10_nfa);
+			strict.max_log10_nfa = r.log10_nfa - 1.0; /* the early exit follows */
 			Correspondence cs(m, cam, strict);
 			CorrespondenceResult rs;
 			EXPECT_FALSE(cs.solve(blobs, nullptr, &rs))

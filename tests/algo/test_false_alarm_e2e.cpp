@@ -50,9 +50,7 @@ Count falsePoses(const char *target_file, const char *camera_file, Scenario scen
 	if (!target.isOk() || !camera.isOk())
 		return run;
 	PipelineConfig pipeline;
-	pipeline.correspondence.max_log10_nfa = max_log10_nfa;
-	pipeline.correspondence.early_exit_log10_nfa =
-		std::min(pipeline.correspondence.early_exit_log10_nfa, max_log10_nfa);
+	pipeline.correspondence.max_log10_nfa = max_log10_nfa; /* the early exit follows */
 	EvaluationConfig e;
 	e.scenario = scenario;
 	e.frames = frames;
