@@ -251,6 +251,26 @@ constexpr std::uint8_t frameCrc(std::uint32_t id, const std::array<std::uint8_t,
 	return crc8J1850(bytes, sizeof(bytes));
 }
 
+/* Byte 6 of every frame: the alive counter (bits 0-3) and the sequence (bits 4-7). */
+constexpr std::uint8_t aliveSeqByte(std::uint8_t alive, std::uint8_t seq)
+{
+	return static_cast<std::uint8_t>((alive & 0x0f) | ((seq & 0x0f) << 4));
+}
+constexpr std::uint8_t frameAlive(const std::array<std::uint8_t, 8> &data)
+{
+	return data[6] & 0x0f;
+}
+constexpr std::uint8_t frameSeq(const std::array<std::uint8_t, 8> &data)
+{
+	return static_cast<std::uint8_t>(data[6] >> 4);
+}
+
+/* A frame of the protocol's length whose byte 7 is its CRC (the identifier not checked). */
+constexpr bool frameIntact(const RawFrame &frame)
+{
+	return frame.len == kFrameLength && frameCrc(frame.id, frame.data) == frame.data[7];
+}
+
 /* Bits on the wire of a classic standard-id data frame with `data_bytes` bytes
  * and worst-case bit stuffing, interframe space included (135 for 8 bytes). */
 constexpr int worstCaseFrameBits(int data_bytes)
@@ -879,8 +899,7 @@ private:
 	/* Byte 6 (alive counter, sequence) of the next frame at offset. */
 	std::uint8_t nextByte6(std::uint32_t offset, std::uint8_t seq) const
 	{
-		return static_cast<std::uint8_t>((alive_[detail::slot(offset)] & 0x0f) |
-						 ((seq & 0x0f) << 4));
+		return aliveSeqByte(alive_[detail::slot(offset)], seq);
 	}
 
 	RawFrame finish(std::uint32_t offset, std::uint8_t seq, std::uint64_t payload)
@@ -891,7 +910,7 @@ private:
 		std::uint8_t &alive = alive_[detail::slot(offset)];
 		for (std::size_t i = 0; i < 6; ++i)
 			f.data[i] = static_cast<std::uint8_t>(payload >> (8 * i));
-		f.data[6] = static_cast<std::uint8_t>((alive & 0x0f) | ((seq & 0x0f) << 4));
+		f.data[6] = aliveSeqByte(alive, seq);
 		f.data[7] = frameCrc(f.id, f.data);
 		alive = static_cast<std::uint8_t>((alive + 1) & 0x0f);
 		return f;
@@ -1188,8 +1207,8 @@ private:
 			return Event::Rejected;
 		}
 
-		const std::uint8_t alive = frame.data[6] & 0x0f;
-		const std::uint8_t seq = static_cast<std::uint8_t>(frame.data[6] >> 4);
+		const std::uint8_t alive = frameAlive(frame.data);
+		const std::uint8_t seq = frameSeq(frame.data);
 		const std::size_t s = slot(offset);
 		if (alive_seen_[s]) {
 			const unsigned int step = (alive - alive_[s]) & 0x0fu;

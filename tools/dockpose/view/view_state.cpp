@@ -481,9 +481,9 @@ std::uint64_t ViewState::sensorFreshness() const
 
 void ViewState::noteCommandAlive(const can::RawFrame &frame)
 {
-	if (frame.len != can::kFrameLength || can::frameCrc(frame.id, frame.data) != frame.data[7])
+	if (!can::frameIntact(frame))
 		return;
-	const int alive = frame.data[6] & 0x0f;
+	const int alive = can::frameAlive(frame.data);
 	if (frame.id == ((base_id_ + can::kCommand) & 0x7ff))
 		bus_alive_.command = alive;
 	else if (frame.id == ((base_id_ + can::kCommandAuth) & 0x7ff))
