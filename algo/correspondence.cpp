@@ -117,6 +117,7 @@ Correspondence::Correspondence(TargetModel target, const CameraModel &camera,
 {
 	diameter_mm_ = target_.diameterMm();
 	cos_view_max_ = std::cos(config_.max_view_angle_deg * kPi / 180.0);
+	tan_view_max_ = std::tan(std::min(config_.max_view_angle_deg, 89.0) * kPi / 180.0);
 	/*
 	 * A stopped search leaves rivals unsought: any rival within the ambiguity
 	 * margin of a pose that stops it must itself be a false alarm the bound
@@ -125,7 +126,6 @@ Correspondence::Correspondence(TargetModel target, const CameraModel &camera,
 	early_exit_log10_nfa_ =
 		std::min(config_.early_exit_log10_nfa,
 			 config_.max_log10_nfa - std::max(config_.ambiguity_margin, 0.0));
-	tan_view_max_ = std::tan(std::min(config_.max_view_angle_deg, 89.0) * kPi / 180.0);
 	for (const auto &p : target_.points_mm)
 		centroid_mm_ += p;
 	if (!target_.points_mm.empty())

@@ -306,9 +306,9 @@ private:
 	double diameter_mm_ = 0.0;
 	/* cos and tan of config_.max_view_angle_deg (tan of at most 89 degrees). */
 	double cos_view_max_ = 0.0;
+	double tan_view_max_ = 0.0;
 	/* config_.early_exit_log10_nfa, at most max_log10_nfa - ambiguity_margin. */
 	double early_exit_log10_nfa_ = 0.0;
-	double tan_view_max_ = 0.0;
 	Eigen::Vector3d centroid_mm_ = Eigen::Vector3d::Zero();
 	/* Front normals of the faces (TargetModel::frontNormals). */
 	StaticVector<Eigen::Vector3d, kMaxFaces> normals_;
