@@ -82,10 +82,10 @@ mount -t configfs configfs /sys/kernel/config || setup_failed "cannot mount conf
 # (read-only) at /run/host-tmp, and mount the share after the tmpfs.
 mkdir -p /run/host-tmp && mount -o bind /tmp /run/host-tmp &&
 	mount -t tmpfs -o mode=1777 tmpfs /tmp || setup_failed "cannot mount /tmp"
-# The repository (scripts, test data, binaries), the working directory and the arm64 tools tree,
-# when they live in the host's /tmp (a checkout there, a build tree there, a cache there): show
-# them (read-only) at their own paths.
-for dir in "$VM_REPO" "$VM_CWD" "${VM_USERLAND:-}"; do
+# The repository (scripts, test data, binaries), the working directory, the arm64 tools tree and
+# the libcamera builds, when they live in the host's /tmp (a checkout there, a build tree there, a
+# cache there): show them (read-only) at their own paths.
+for dir in "$VM_REPO" "$VM_CWD" "${VM_USERLAND:-}" "${VM_LIBCAMERA:-}"; do
 	case $dir in
 	"" | /tmp) ;;
 	/tmp/*)
