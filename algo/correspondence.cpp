@@ -632,20 +632,43 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 /*
  * log10 of the number of hypotheses one family of the full search can form
  * from this frame's candidates: every candidate anchors the quadrilaterals of
- * three of its neighbours (8 assignments to each face), or the triangles of
- * two (for each face, 4 hidden vertices, 6 assignments and 2 starts).
- * Duplicates are counted, so this bounds the search from above; the factor 2
- * shares the false-alarm budget between the two families.
+ * three of its neighbours (8 assignments to each face), once among every
+ * candidate and once among the clipped spots alone (searchQuads()), or the
+ * triangles of two (for each face, 4 hidden vertices, 6 assignments and 2
+ * starts). Duplicates are counted, so this bounds the search from above;
+ * the factor 2 shares the false-alarm budget between the two families.
  */
 double Correspondence::log10Tests(bool triangles) const
 {
 	const int candidates = std::max(n_cand_, context_.frame_candidates);
-	const double m = candidates;
-	const double k = std::min(triangles ? config_.triangle_neighbours : config_.neighbours,
-				  std::max(candidates - 1, 0));
 	const double faces = static_cast<double>(target_.faces.size());
-	const double n = triangles ? m * 0.5 * k * (k - 1.0) * faces * 96.0
-				   : m * k * (k - 1.0) * (k - 2.0) / 6.0 * faces * 8.0;
+	auto quads = [&](int members) {
+		const double m = members;
+		const double k = std::min(config_.neighbours, std::max(members - 1, 0));
+		return m * k * (k - 1.0) * (k - 2.0) / 6.0 * faces * 8.0;
+	};
+	double n = 0.0;
+	if (triangles) {
+		const double m = candidates;
+		const double k = std::min(config_.triangle_neighbours, std::max(candidates - 1, 0));
+		n = m * 0.5 * k * (k - 1.0) * faces * 96.0;
+	} else {
+		/*
+		 * The clipped spots' pass counts as a second one over every
+		 * candidate where they are not known (windows: the last whole
+		 * frame's candidates are counted, not its clipped ones).
+		 */
+		int clipped = 0;
+		for (int a = 0; a < n_cand_; ++a)
+			clipped += clipped_[cand_[a]];
+		const bool clipped_pass = clipped >= 4 && clipped < n_cand_; /* as fullSearch() */
+		double second = 0.0;
+		if (candidates > n_cand_)
+			second = quads(candidates);
+		else if (clipped_pass)
+			second = quads(clipped);
+		n = quads(candidates) + second;
+	}
 	return std::log10(2.0 * std::max(n, 1.0));
 }
 
@@ -1161,17 +1184,25 @@ bool Correspondence::earlyExit(const Hypothesis &h) const
 
 /*
  * Each usable candidate's nearest neighbours in undistorted image
- * coordinates (positions in cand_), nearest first.
+ * coordinates (positions in cand_), nearest first, among the candidates of
+ * `among` (bits of cand_ positions; candidates outside it get none).
  */
-void Correspondence::findNeighbours()
+void Correspondence::findNeighbours(std::uint64_t among, NeighbourTable *table) const
 {
-	const int k = std::min(config_.neighbours, n_cand_ - 1);
+	table->among = among;
+	const int members = std::popcount(among);
+	const int k = std::min(config_.neighbours, members - 1);
 	for (int a = 0; a < n_cand_; ++a) {
+		table->n[a] = 0;
+		table->bits[a] = 0;
+		if (!(among & (std::uint64_t{ 1 } << a)))
+			continue;
+		auto &list = table->list[a];
 		std::array<double, kMaxCandidates> best_d2;
 		int n = 0;
-		for (int b = 0; b < n_cand_; ++b) {
-			if (b == a)
-				continue;
+		for (std::uint64_t others = among & ~(std::uint64_t{ 1 } << a); others != 0;
+		     others &= others - 1) {
+			const int b = std::countr_zero(others);
 			const double d2 = (xy_[cand_[a]] - xy_[cand_[b]]).squaredNorm();
 			if (n == k && d2 >= best_d2[n - 1])
 				continue;
@@ -1179,25 +1210,38 @@ void Correspondence::findNeighbours()
 			int pos = n < k ? n++ : n - 1;
 			while (pos > 0 && best_d2[pos - 1] > d2) {
 				best_d2[pos] = best_d2[pos - 1];
-				neighbour_list_[a][pos] = neighbour_list_[a][pos - 1];
+				list[pos] = list[pos - 1];
 				--pos;
 			}
 			best_d2[pos] = d2;
-			neighbour_list_[a][pos] = static_cast<std::int8_t>(b);
+			list[pos] = static_cast<std::int8_t>(b);
 		}
-		n_neighbours_[a] = n;
-		neighbour_bits_[a] = 0;
+		table->n[a] = n;
 		for (int i = 0; i < n; ++i)
-			neighbour_bits_[a] |= std::uint64_t{ 1 } << neighbour_list_[a][i];
+			table->bits[a] |= std::uint64_t{ 1 } << list[i];
 	}
+}
+
+/* Was the candidate set `set` (four bits) formed by searchQuads() over `table`? */
+bool Correspondence::formedIn(const NeighbourTable &table, std::uint64_t set)
+{
+	if ((set & table.among) != set)
+		return false;
+	for (std::uint64_t members = set; members != 0; members &= members - 1) {
+		const int x = std::countr_zero(members);
+		const std::uint64_t others = set & ~(std::uint64_t{ 1 } << x);
+		if ((table.bits[x] & others) == others)
+			return true;
+	}
+	return false;
 }
 
 /* The first triangle_neighbours of candidate a's neighbours, as bits. */
 std::uint64_t Correspondence::triangleNeighbours(int a) const
 {
 	std::uint64_t bits = 0;
-	for (int i = 0; i < std::min(n_neighbours_[a], config_.triangle_neighbours); ++i)
-		bits |= std::uint64_t{ 1 } << neighbour_list_[a][i];
+	for (int i = 0; i < std::min(neighbours_.n[a], config_.triangle_neighbours); ++i)
+		bits |= std::uint64_t{ 1 } << neighbours_.list[a][i];
 	return bits;
 }
 
@@ -1235,17 +1279,18 @@ bool Correspondence::screenQuad(const QuadInvariant &inv, std::size_t f, const i
 }
 
 /*
- * Quadrilaterals of each candidate and three of its neighbours, strongest
- * anchors first, each set once (at the strongest member whose neighbours
- * hold the other three), in convex position, screened against every face in
- * its 8 assignments (the invariant, once per quadrilateral, then
- * quadShape()), and the survivors solved and verified at once.
+ * Quadrilaterals of each candidate and three of its neighbours in `table`,
+ * strongest anchors first, each set once (at the strongest member whose
+ * neighbours hold the other three; sets `before`'s pass formed are skipped),
+ * in convex position, screened against every face in its 8 assignments (the
+ * invariant, once per quadrilateral, then quadShape()), and the survivors
+ * solved and verified at once.
  */
-bool Correspondence::searchQuads()
+bool Correspondence::searchQuads(const NeighbourTable &table, const NeighbourTable *before)
 {
 	for (int a = 0; a < n_cand_; ++a) {
-		const int na = n_neighbours_[a];
-		const auto &nb = neighbour_list_[a];
+		const int na = table.n[a];
+		const auto &nb = table.list[a];
 		for (int i = 0; i < na; ++i)
 			for (int j = i + 1; j < na; ++j)
 				for (int l = j + 1; l < na; ++l) {
@@ -1258,10 +1303,10 @@ bool Correspondence::searchQuads()
 					for (int e = 0; e < 3 && !earlier; ++e) {
 						const std::uint64_t others =
 							set & ~(std::uint64_t{ 1 } << m[e]);
-						earlier = m[e] < a && (neighbour_bits_[m[e]] &
-								       others) == others;
+						earlier = m[e] < a &&
+							  (table.bits[m[e]] & others) == others;
 					}
-					if (earlier)
+					if (earlier || (before && formedIn(*before, set)))
 						continue;
 					if (hypotheses_ >= config_.max_hypotheses ||
 					    verified_ >= config_.max_verifications) {
@@ -1378,8 +1423,8 @@ bool Correspondence::searchTriangles()
 	const int budget =
 		std::min(config_.max_hypotheses, hypotheses_ + config_.max_triangle_hypotheses);
 	for (int a0 = 0; a0 < n_cand_; ++a0) {
-		const int na = std::min(n_neighbours_[a0], config_.triangle_neighbours);
-		const auto &nb = neighbour_list_[a0];
+		const int na = std::min(neighbours_.n[a0], config_.triangle_neighbours);
+		const auto &nb = neighbours_.list[a0];
 		for (int i = 0; i < na; ++i)
 			for (int j = i + 1; j < na; ++j) {
 				const int m[2] = { nb[i], nb[j] };
@@ -1471,7 +1516,23 @@ void Correspondence::addCompetitors(const Hypothesis &chosen)
 
 bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *result)
 {
-	findNeighbours();
+	/*
+	 * Clipped spots first, among themselves: at close range a target's
+	 * LEDs are far apart in the image and every reflection between them
+	 * pushes them out of each other's nearest neighbours, but its LEDs,
+	 * driven to be the brightest things in view, reach the clip level
+	 * where most reflections do not. Then every candidate.
+	 */
+	std::uint64_t all = 0, clipped = 0;
+	for (int a = 0; a < n_cand_; ++a) {
+		all |= std::uint64_t{ 1 } << a;
+		if (clipped_[cand_[a]])
+			clipped |= std::uint64_t{ 1 } << a;
+	}
+	findNeighbours(all, &neighbours_);
+	const bool clipped_pass = clipped != all && std::popcount(clipped) >= 4;
+	if (clipped_pass)
+		findNeighbours(clipped, &clipped_neighbours_);
 
 	/*
 	 * Unless a quadrilateral gave a complete explanation (every predicted LED
@@ -1479,7 +1540,9 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	 * hidden no face is complete, and the true pose comes only from there,
 	 * while a wrong, incomplete one may have come from the quadrilaterals.
 	 */
-	bool complete = searchQuads();
+	bool complete = clipped_pass && searchQuads(clipped_neighbours_, nullptr);
+	complete = complete ||
+		   searchQuads(neighbours_, clipped_pass ? &clipped_neighbours_ : nullptr);
 	for (const auto &h : kept_)
 		complete = complete || (acceptable(h) && h.missing == 0);
 	if (!complete)
@@ -1562,6 +1625,7 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 	px_.clear();
 	xy_.clear();
 	usable_.clear();
+	clipped_.clear();
 	var_.clear();
 	cov_.clear();
 	n_cand_ = 0;
@@ -1575,6 +1639,7 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 		px_.push_back(uv);
 		xy_.push_back(xy);
 		usable_.push_back(ok ? 1 : 0);
+		clipped_.push_back(blob.saturated_px > 0 ? 1 : 0);
 		Eigen::Matrix2d cov;
 		cov << blob.cov_uu_px2, blob.cov_uv_px2, blob.cov_uv_px2, blob.cov_vv_px2;
 		const bool known = blob.cov_uu_px2 > 0.0 && blob.cov_vv_px2 > 0.0;

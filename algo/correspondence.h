@@ -294,9 +294,20 @@ private:
 	double log10Tests(bool triangles) const;
 	void findCongruences();
 	void addCompetitors(const Hypothesis &chosen);
-	void findNeighbours();
+	/*
+	 * Each candidate's nearest neighbours (positions in cand_, nearest
+	 * first, as a list and as bits) among the candidates of `among`.
+	 */
+	struct NeighbourTable {
+		std::uint64_t among = 0; /* bits of cand_ positions */
+		std::array<std::uint64_t, kMaxCandidates> bits{};
+		std::array<std::array<std::int8_t, kMaxCandidates>, kMaxCandidates> list{};
+		std::array<int, kMaxCandidates> n{};
+	};
+	void findNeighbours(std::uint64_t among, NeighbourTable *table) const;
 	std::uint64_t triangleNeighbours(int a) const;
-	bool searchQuads();
+	static bool formedIn(const NeighbourTable &table, std::uint64_t set);
+	bool searchQuads(const NeighbourTable &table, const NeighbourTable *before);
 	bool searchTriangles();
 	bool fullSearch(const Pose *reference, CorrespondenceResult *result);
 
@@ -348,6 +359,7 @@ private:
 	StaticVector<Eigen::Vector2d, kMaxCandidates> xy_;
 	StaticVector<std::uint8_t, kMaxCandidates> usable_;
 	StaticVector<double, kMaxCandidates> var_; /* centroid variance along its major axis, px^2 */
+	StaticVector<std::uint8_t, kMaxCandidates> clipped_; /* the spot reaches the clip level */
 	StaticVector<Eigen::Matrix2d, kMaxCandidates> cov_; /* centroid covariance, px^2 */
 	/* Usable candidates, strongest first, and each one's nearest neighbours (as bits and a list). */
 	std::array<int, kMaxCandidates> cand_{};
@@ -355,9 +367,9 @@ private:
 	StaticVector<std::int8_t, kMaxCandidates> by_u_;
 	StaticVector<double, kMaxCandidates> u_sorted_;
 	int n_cand_ = 0;
-	std::array<std::uint64_t, kMaxCandidates> neighbour_bits_{};
-	std::array<std::array<std::int8_t, kMaxCandidates>, kMaxCandidates> neighbour_list_{};
-	std::array<int, kMaxCandidates> n_neighbours_{};
+	/* Among every candidate, and among the clipped spots alone (see searchQuads()). */
+	NeighbourTable neighbours_;
+	NeighbourTable clipped_neighbours_;
 	SolveContext context_;
 	double log10_quad_tests_ = 0.0; /* hypotheses the full search can form on this frame */
 	double log10_triangle_tests_ = 0.0;

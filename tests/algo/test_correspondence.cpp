@@ -198,6 +198,64 @@ TEST(Correspondence, TheEarlyExitStaysAMarginBelowTheBound)
 }
 
 /*
+ * At close range a target's LEDs lie far apart in the image and reflections
+ * between them push each out of the others' nearest neighbours: no face's
+ * four LEDs are among one another's 9 nearest, and the quadrilateral search
+ * over every candidate cannot form a face. The LEDs reach the clip level and
+ * the reflections do not, so the pass among the clipped spots forms them.
+ * The same blobs with no spot marked clipped: the face is found less often.
+ */
+TEST(Correspondence, ClippedSpotsFormTheirFacesAmongReflectionsBetweenThem)
+{
+	std::mt19937 rng(23);
+	const CameraModel cam(cam1456());
+	const TargetModel m = test::wedgeModel();
+	Correspondence c(m, cam, {});
+	std::uniform_real_distribution<double> ang(-10, 10), range(320, 420);
+	int found_clipped = 0, found_unmarked = 0, trials = 0;
+	for (int t = 0; t < 20; ++t) {
+		const Pose truth = makePose(ang(rng), ang(rng), ang(rng), 0, 0, range(rng));
+		StaticVector<Blob, kMaxCandidates> blobs = observe(m, cam, truth, 0, 0, 0.05, rng);
+		ASSERT_GE(blobs.size(), 6u);
+		double u0 = 1e9, u1 = -1e9, v0 = 1e9, v1 = -1e9;
+		for (Blob &b : blobs) {
+			u0 = std::min(u0, b.u_px);
+			u1 = std::max(u1, b.u_px);
+			v0 = std::min(v0, b.v_px);
+			v1 = std::max(v1, b.v_px);
+			b.saturated_px = 400;
+			b.cov_uu_px2 = b.cov_vv_px2 = 0.05 * 0.05;
+		}
+		/* Unclipped reflections among the LEDs, as dense as 30 in the target's extent. */
+		std::uniform_real_distribution<double> u(u0, u1), v(v0, v1);
+		for (int k = 0; k < 30; ++k) {
+			Blob b;
+			b.u_px = u(rng);
+			b.v_px = v(rng);
+			b.weight = 900;
+			b.cov_uu_px2 = b.cov_vv_px2 = 0.05 * 0.05;
+			blobs.push_back(b);
+		}
+		std::shuffle(blobs.begin(), blobs.end(), rng);
+		++trials;
+		CorrespondenceResult r;
+		if (c.solve(blobs, nullptr, &r)) {
+			++found_clipped;
+			expectPose(truth, r.refined.pose, 1.0, 5.0);
+		}
+		for (Blob &b : blobs)
+			b.saturated_px = 0;
+		CorrespondenceResult ru;
+		if (c.solve(blobs, nullptr, &ru)) {
+			++found_unmarked;
+			expectPose(truth, ru.refined.pose, 1.0, 5.0);
+		}
+	}
+	EXPECT_GE(found_clipped, trials * 9 / 10);
+	EXPECT_LT(found_unmarked, found_clipped);
+}
+
+/*
  * The box corner with its corner LED (shared by all three faces) hidden
  * leaves no face complete: only the triangle search can find the pose, and
  * it solves P3P only for the vertex order a face seen from its front shows.
