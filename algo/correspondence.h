@@ -6,9 +6,13 @@
  * Hypotheses. Every usable candidate (up to kMaxCandidates) takes part. Each
  * candidate's k nearest neighbours (in undistorted image coordinates) span
  * the quadrilaterals it anchors, strongest anchors first, each quadrilateral
- * once. A quadrilateral in convex position is screened against every face in
- * its 8 cyclic assignments by a perspective invariant: where its diagonals
- * cross, as fractions along each diagonal. Those fractions are the face's own
+ * once: first among the clipped spots alone (their own nearest clipped
+ * neighbours: close up, reflections between a target's LEDs push them out of
+ * each other's nearest candidates, but the LEDs clip where most reflections
+ * do not), then among every candidate, skipping the sets already formed; the
+ * NFA's count of tests includes both. A quadrilateral in convex position is
+ * screened against every face in its 8 cyclic assignments by a perspective
+ * invariant: where its diagonals cross, as fractions along each diagonal. Those fractions are the face's own
  * under an affine view and move by at most a quarter of the diagonal's
  * relative depth change under perspective, a bound that follows from the
  * diagonal's image length and the largest view angle. Survivors go through the
