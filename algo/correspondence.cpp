@@ -635,8 +635,10 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
  * three of its neighbours (8 assignments to each face), once among every
  * candidate and once among the clipped spots alone (searchQuads()), or the
  * triangles of two (for each face, 4 hidden vertices, 6 assignments and 2
- * starts). Duplicates are counted, so this bounds the search from above;
- * the factor 2 shares the false-alarm budget between the two families.
+ * starts). Duplicates are counted, so this bounds the search from above,
+ * as does C(candidates, 4) for the quadrilaterals, each set of four formed at
+ * most once; the factor 2 shares the false-alarm budget between the two
+ * families.
  */
 double Correspondence::log10Tests(bool triangles) const
 {
@@ -667,7 +669,9 @@ double Correspondence::log10Tests(bool triangles) const
 			second = quads(candidates);
 		else if (clipped_pass)
 			second = quads(clipped);
-		n = quads(candidates) + second;
+		/* Each set of four is formed once, in one pass or the other. */
+		n = std::min(quads(candidates) + second,
+			     std::pow(10.0, log10Choose(candidates, 4)) * faces * 8.0);
 	}
 	return std::log10(2.0 * std::max(n, 1.0));
 }
@@ -1179,7 +1183,47 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
  */
 bool Correspondence::earlyExit(const Hypothesis &h) const
 {
-	return acceptable(h) && fitStatistical(h, 1.0) && h.log10_nfa <= early_exit_log10_nfa_;
+	return acceptable(h) && fitStatistical(h, 1.0) && h.log10_nfa <= early_exit_log10_nfa_ &&
+	       !candidateLeftOver(h);
+}
+
+/*
+ * Is a candidate the pose leaves unexplained near the target in the image:
+ * inside the bounding box of its matched spots and of every model LED
+ * projected, widened by half its size on each side (by the gate at least)?
+ * Then a different pose may explain it as well: on a far box corner, five of
+ * six spots fit a wrong pose as their covariance predicts (log10 NFA -8.3)
+ * two hypotheses before the true pose explains all six (-15). The search
+ * goes on; only the early exit waits.
+ */
+bool Correspondence::candidateLeftOver(const Hypothesis &h) const
+{
+	if (h.match.pairs.empty())
+		return false;
+	const double gate = gatePx(h.refined.pose);
+	Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::max());
+	Eigen::Vector2d hi = -lo;
+	std::uint64_t used = 0;
+	for (const auto &pair : h.match.pairs) {
+		const auto j = static_cast<std::size_t>(pair[1]);
+		used |= std::uint64_t{ 1 } << j;
+		lo = lo.cwiseMin(px_[j]);
+		hi = hi.cwiseMax(px_[j]);
+	}
+	for (const Eigen::Vector3d &point : target_.points_mm) {
+		Eigen::Vector2d uv;
+		if (camera_.project(h.refined.pose.apply(point), &uv)) {
+			lo = lo.cwiseMin(uv);
+			hi = hi.cwiseMax(uv);
+		}
+	}
+	const Eigen::Vector2d margin = (0.5 * (hi - lo)).cwiseMax(Eigen::Vector2d::Constant(gate));
+	lo -= margin;
+	hi += margin;
+	return forCandidatesNear(0.5 * (lo.x() + hi.x()), 0.5 * (hi.x() - lo.x()), [&](int j) {
+		return !(used & (std::uint64_t{ 1 } << j)) && px_[j].y() >= lo.y() &&
+		       px_[j].y() <= hi.y();
+	});
 }
 
 /*
@@ -1581,7 +1625,13 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 		if (i == best || !rival(kept_[i], chosen))
 			continue;
 		const Hypothesis &other = kept_[i];
-		if (other.match.pairs.size() < chosen.match.pairs.size())
+		/*
+		 * One that explains fewer LEDs stands aside, unless it fits as its
+		 * centroids' covariance predicts and the chosen pose only within the
+		 * px floor: then the extra LEDs are no evidence for the chosen pose.
+		 */
+		if (other.match.pairs.size() < chosen.match.pairs.size() &&
+		    !(fitStatistical(other, 1.0) && !fitStatistical(chosen, 1.0)))
 			continue;
 		bool symmetric = false;
 		for (const auto &s : symmetries_) {

@@ -228,6 +228,7 @@ private:
 	static double chi2Bound(int points);
 	bool fitStatistical(const Hypothesis &hypothesis, double slack) const;
 	bool earlyExit(const Hypothesis &hypothesis) const;
+	bool candidateLeftOver(const Hypothesis &hypothesis) const;
 	bool samePose(const Pose &a, const Pose &b) const;
 	double sizePx(const Pose &pose) const;
 	double gatePx(const Pose &pose) const;

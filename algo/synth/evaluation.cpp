@@ -356,7 +356,7 @@ EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &came
 
 	Image frame;
 	EvaluationTally tally;
-	for (int i = 0; i < config.frames; ++i) {
+	for (int i = 0; i < std::max(config.first_frame, 0) + config.frames; ++i) {
 		FrameOutcome out;
 		out.index = i;
 		RenderOptions o;
@@ -424,6 +424,8 @@ EvaluationTally evaluate(const TargetModel &target, const CameraIntrinsics &came
 			}
 		}
 
+		if (i < config.first_frame)
+			continue;
 		renderer.render(out.truth, o, render_seed, &frame, &out.render);
 		if (!config.track)
 			pipeline.reset();

@@ -68,6 +68,12 @@ bool parseScenario(const std::string &name, Scenario *scenario);
 struct EvaluationConfig {
 	int frames = 100;
 	std::uint64_t seed = 1;
+	/*
+	 * Frames first_frame .. first_frame + frames - 1 of the seed's sequence:
+	 * one frame of a long run (its CSV's `frame`) solved again alone. The
+	 * legacy frames share one random stream, so theirs are drawn, not solved.
+	 */
+	int first_frame = 0;
 	double min_range_mm = 150.0;
 	double max_range_mm = 2100.0;
 	double max_angle_deg = 30.0; /* roll, pan, tilt uniform in ±this */

@@ -110,6 +110,10 @@ std::optional<int> parseOptions(int argc, char **argv, ToolOptions *o)
 	app.add_option("--frames", e.frames, "frames to render and solve (per scenario listed)")
 		->check(CLI::Range(1, 10000000));
 	app.add_option("--seed", e.seed, "random seed (the k-th scenario listed uses seed + k)");
+	app.add_option(
+		   "--first-frame", e.first_frame,
+		   "start at this frame of the seed's sequence (a CSV's `frame`: solve it again alone)")
+		->check(CLI::Range(0, 10000000));
 	app.add_option("--min-range-mm", e.min_range_mm, "nearest range")
 		->check(CLI::PositiveNumber);
 	app.add_option("--max-range-mm", e.max_range_mm, "farthest range")
