@@ -43,19 +43,21 @@
  * doubled, is its NFA. A pose is accepted when log10 NFA <= max_log10_nfa,
  * it rests on at least min_leds LEDs (a floor), its rms reprojection error is
  * within max_rms_px, and no other, different pose explains the image as well
- * (else Ambiguous): the competitors are the other hypotheses kept, the
- * model's near-congruences of faces applied to the chosen pose (a box corner
- * half-turned maps six of its seven LEDs onto others), and, for a planar
- * match, the mirror pose about the line of sight. Poses that differ only by a
+ * (else Ambiguous; one on fewer LEDs does when it fits the centroids'
+ * covariance and the chosen pose only max_rms_px): the competitors are the
+ * other hypotheses kept, the model's near-congruences of faces applied to
+ * the chosen pose (a box corner half-turned maps six of its seven LEDs onto
+ * others), and, for a planar match, the mirror pose about the line of sight. Poses that differ only by a
  * symmetry of the target (e.g. the wedge's 180 degree turn about its axis)
  * are one pose: the one closest to the tracked pose, else to the model's own
  * orientation, is reported.
  *
  * The search stops early once a verified pose's NFA is below
  * early_exit_log10_nfa and its residuals are what the centroids' covariance
- * predicts: no chance competitor can come close, and the structural ones are
- * generated explicitly. (A pose that fits only within max_rms_px does not
- * stop the search: it may be a near-congruent copy of the true pose.)
+ * predicts, and it leaves no candidate near the target unexplained: no chance
+ * competitor can come close, and the structural ones are generated
+ * explicitly. (A pose that fits only within max_rms_px does not stop the
+ * search: it may be a near-congruent copy of the true pose.)
  *
  * Tracking: with a previous pose, predicted LED positions are matched first;
  * the full search runs only when that fails.
