@@ -1205,7 +1205,8 @@ bool Correspondence::candidateLeftOver(const Hypothesis &h) const
 	Eigen::Vector2d hi = -lo;
 	std::uint64_t used = 0;
 	for (const auto &pair : h.match.pairs) {
-		const auto j = static_cast<std::size_t>(pair[1]);
+		const std::size_t j =
+			static_cast<std::uint8_t>(pair[1]); /* a candidate index, 0..63 */
 		used |= std::uint64_t{ 1 } << j;
 		lo = lo.cwiseMin(px_[j]);
 		hi = hi.cwiseMax(px_[j]);
