@@ -660,15 +660,11 @@ double Correspondence::log10Tests(bool triangles) const
 		 * candidate where they are not known (windows: the last whole
 		 * frame's candidates are counted, not its clipped ones).
 		 */
-		int clipped = 0;
-		for (int a = 0; a < n_cand_; ++a)
-			clipped += clipped_[cand_[a]];
-		const bool clipped_pass = clipped >= 4 && clipped < n_cand_; /* as fullSearch() */
 		double second = 0.0;
 		if (candidates > n_cand_)
 			second = quads(candidates);
-		else if (clipped_pass)
-			second = quads(clipped);
+		else if (clippedPass())
+			second = quads(std::popcount(clipped_bits_));
 		/* Each set of four is formed once, in one pass or the other. */
 		n = std::min(quads(candidates) + second,
 			     std::pow(10.0, log10Choose(candidates, 4)) * faces * 8.0);
@@ -1267,6 +1263,13 @@ void Correspondence::findNeighbours(std::uint64_t among, NeighbourTable *table) 
 	}
 }
 
+/* Does the clipped spots' own pass run: four of them at least, and not every candidate? */
+bool Correspondence::clippedPass() const
+{
+	const int clipped = std::popcount(clipped_bits_);
+	return clipped >= 4 && clipped < n_cand_;
+}
+
 /* Was the candidate set `set` (four bits) formed by searchQuads() over `table`? */
 bool Correspondence::formedIn(const NeighbourTable &table, std::uint64_t set)
 {
@@ -1568,16 +1571,12 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	 * driven to be the brightest things in view, reach the clip level
 	 * where most reflections do not. Then every candidate.
 	 */
-	std::uint64_t all = 0, clipped = 0;
-	for (int a = 0; a < n_cand_; ++a) {
-		all |= std::uint64_t{ 1 } << a;
-		if (clipped_[cand_[a]])
-			clipped |= std::uint64_t{ 1 } << a;
-	}
+	const std::uint64_t all = n_cand_ >= 64 ? ~std::uint64_t{ 0 }
+						: (std::uint64_t{ 1 } << n_cand_) - 1;
 	findNeighbours(all, &neighbours_);
-	const bool clipped_pass = clipped != all && std::popcount(clipped) >= 4;
+	const bool clipped_pass = clippedPass();
 	if (clipped_pass)
-		findNeighbours(clipped, &clipped_neighbours_);
+		findNeighbours(clipped_bits_, &clipped_neighbours_);
 
 	/*
 	 * Unless a quadrilateral gave a complete explanation (every predicted LED
@@ -1676,7 +1675,7 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 	px_.clear();
 	xy_.clear();
 	usable_.clear();
-	clipped_.clear();
+	clipped_bits_ = 0;
 	var_.clear();
 	cov_.clear();
 	n_cand_ = 0;
@@ -1685,12 +1684,14 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 		const Eigen::Vector2d uv{ blob.u_px, blob.v_px };
 		Eigen::Vector2d xy = Eigen::Vector2d::Zero();
 		const bool ok = camera_.pixelToNormalized(uv, &xy);
-		if (ok)
+		if (ok) {
+			if (blob.saturated_px > 0)
+				clipped_bits_ |= std::uint64_t{ 1 } << n_cand_;
 			cand_[n_cand_++] = static_cast<int>(px_.size());
+		}
 		px_.push_back(uv);
 		xy_.push_back(xy);
 		usable_.push_back(ok ? 1 : 0);
-		clipped_.push_back(blob.saturated_px > 0 ? 1 : 0);
 		Eigen::Matrix2d cov;
 		cov << blob.cov_uu_px2, blob.cov_uv_px2, blob.cov_uv_px2, blob.cov_vv_px2;
 		const bool known = blob.cov_uu_px2 > 0.0 && blob.cov_vv_px2 > 0.0;

@@ -313,6 +313,7 @@ private:
 	};
 	void findNeighbours(std::uint64_t among, NeighbourTable *table) const;
 	std::uint64_t triangleNeighbours(int a) const;
+	bool clippedPass() const;
 	static bool formedIn(const NeighbourTable &table, std::uint64_t set);
 	bool searchQuads(const NeighbourTable &table, const NeighbourTable *before);
 	bool searchTriangles();
@@ -366,7 +367,7 @@ private:
 	StaticVector<Eigen::Vector2d, kMaxCandidates> xy_;
 	StaticVector<std::uint8_t, kMaxCandidates> usable_;
 	StaticVector<double, kMaxCandidates> var_; /* centroid variance along its major axis, px^2 */
-	StaticVector<std::uint8_t, kMaxCandidates> clipped_; /* the spot reaches the clip level */
+	std::uint64_t clipped_bits_ = 0; /* cand_ positions of spots that reach the clip level */
 	StaticVector<Eigen::Matrix2d, kMaxCandidates> cov_; /* centroid covariance, px^2 */
 	/* Usable candidates, strongest first, and each one's nearest neighbours (as bits and a list). */
 	std::array<int, kMaxCandidates> cand_{};
