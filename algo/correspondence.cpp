@@ -373,27 +373,26 @@ bool Correspondence::plausible(const Pose &pose) const
 }
 
 /*
- * LEDs that may shine towards the camera: an LED shines only out of the
- * faces it sits on, and one of them must face the camera (bit mask).
+ * LEDs that may be seen (bit mask): an LED shines only out of the faces it
+ * sits on, and one of them must be seen from its front within the view angle
+ * (faceVisible()). The LEDs a pose predicts and the LEDs it may match are the
+ * same set: a pose that explains a spot with an LED seen edge-on (a wrong box
+ * corner pose put one at 89 degrees, where the true pose saw every matched
+ * LED within 57) would claim a spot the LED cannot make.
  */
 std::uint32_t Correspondence::frontLeds(const Pose &pose) const
-{
-	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
-	std::uint32_t front = 0;
-	for (std::size_t f = 0; f < target_.faces.size(); ++f)
-		if (normals_[f].dot(camera_t - face_centres_[f]) > 0.0)
-			front |= led_faces_mask_[f];
-	return front;
-}
-
-/* LEDs on faces seen from the front, projecting inside the frame. */
-std::uint32_t Correspondence::predictedLeds(const Pose &pose, double margin_px) const
 {
 	std::uint32_t front = 0;
 	for (std::size_t f = 0; f < target_.faces.size(); ++f)
 		if (faceVisible(pose, f))
-			for (int k = 0; k < 4; ++k)
-				front |= 1u << target_.faces[f][k];
+			front |= led_faces_mask_[f];
+	return front;
+}
+
+/* frontLeds() projecting inside the frame, margin_px from its edge. */
+std::uint32_t Correspondence::predictedLeds(const Pose &pose, double margin_px) const
+{
+	const std::uint32_t front = frontLeds(pose);
 	std::uint32_t inside = 0;
 	for (std::size_t i = 0; i < target_.points_mm.size(); ++i) {
 		if (!(front & (1u << i)))

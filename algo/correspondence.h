@@ -114,7 +114,7 @@ struct CorrespondenceConfig {
 	int max_triangle_hypotheses = 4000;
 	/* ... and verify (refine over all predicted LEDs) at most this many: the search's time bound. */
 	int max_verifications = 400;
-	/* Faces seen more obliquely than this (or from behind) are predicted invisible. */
+	/* Faces seen more obliquely than this (or from behind) are predicted invisible, and their LEDs match no spot. */
 	double max_view_angle_deg = 80.0;
 	RefineOptions refine;
 };

@@ -196,5 +196,20 @@ TEST(StructuralRivals, AFitWithinThePxFloorYieldsToOneThatFitsTheCovariance)
 	EXPECT_EQ(one.status, PoseStatus::Ambiguous);
 }
 
+/*
+ * A box corner at 378 mm, five spots, nothing else in the frame: a wrong pose
+ * explained all five with one LED seen at 89 degrees from its face's normal
+ * (edge-on, where it makes no spot), at log10 NFA -11.4 against the true
+ * pose's -11.0, and the frame was ambiguous. An LED may now be matched only
+ * where the pose predicts it visible (within max_view_angle_deg): the wrong
+ * pose keeps four LEDs and the true one is chosen.
+ */
+TEST(StructuralRivals, AnLedSeenEdgeOnExplainsNoSpot)
+{
+	const OneFrame one = solveOneFrame("corner.json", 1450, 2026, -4.0);
+	EXPECT_TRUE(one.correct);
+	EXPECT_FALSE(one.wrong);
+}
+
 } /* namespace */
 } /* namespace dockpose */
