@@ -211,5 +211,21 @@ TEST(StructuralRivals, AnLedSeenEdgeOnExplainsNoSpot)
 	EXPECT_FALSE(one.wrong);
 }
 
+/*
+ * The other side of the rule above: a box corner at 488 mm, six spots, the
+ * true pose on all six (log10 NFA -14.4) fitting within the px floor (0.05
+ * px) at chi2 33, just past its 99.9 % point (22.7), beside a four-LED pose
+ * that fits its covariance (chi2 1.5, log10 NFA -4.0) and leaves two of the
+ * spots unexplained. The frame was ambiguous; a fewer-LED rival now counts
+ * only against a pose whose error is beyond twice what its covariance
+ * predicts.
+ */
+TEST(StructuralRivals, ATruePoseJustPastItsChiSquareBoundKeepsItsExtraLeds)
+{
+	const OneFrame one = solveOneFrame("corner.json", 1928, 2026, -4.0);
+	EXPECT_TRUE(one.correct);
+	EXPECT_FALSE(one.wrong);
+}
+
 } /* namespace */
 } /* namespace dockpose */
