@@ -176,6 +176,9 @@ void solveP3pDepths(const Eigen::Vector2d xy[3], const double sides_mm2[3], P3pD
 				break;
 			for (int i = 0; i < 3; ++i)
 				s[i] -= step(i);
+			/* Converged: a further step would be below rounding. */
+			if (step.cwiseAbs().maxCoeff() <= 1e-12 * std::max({ s[0], s[1], s[2] }))
+				break;
 		}
 		if (!(s[0] > 0.0 && s[1] > 0.0 && s[2] > 0.0))
 			continue;
