@@ -350,8 +350,12 @@ void Correspondence::findCongruences()
 /* Is face f seen from its front, within the view angle, from this pose? */
 bool Correspondence::faceVisible(const Pose &pose, std::size_t f) const
 {
-	const Eigen::Vector3d camera_t =
-		-pose.R.transpose() * pose.t_mm; /* camera centre, target frame */
+	return faceVisibleFrom(-pose.R.transpose() * pose.t_mm, f);
+}
+
+/* The same from camera_t, the camera centre in the target frame (mm). */
+bool Correspondence::faceVisibleFrom(const Eigen::Vector3d &camera_t, std::size_t f) const
+{
 	const Eigen::Vector3d view = (camera_t - face_centres_[f]).normalized();
 	return normals_[f].dot(view) > cos_view_max_;
 }
@@ -382,9 +386,10 @@ bool Correspondence::plausible(const Pose &pose) const
  */
 std::uint32_t Correspondence::frontLeds(const Pose &pose) const
 {
+	const Eigen::Vector3d camera_t = -pose.R.transpose() * pose.t_mm;
 	std::uint32_t front = 0;
 	for (std::size_t f = 0; f < target_.faces.size(); ++f)
-		if (faceVisible(pose, f))
+		if (faceVisibleFrom(camera_t, f))
 			front |= led_faces_mask_[f];
 	return front;
 }

@@ -216,6 +216,7 @@ private:
 	void orientFaces();
 	void findSymmetries();
 	bool faceVisible(const Pose &pose, std::size_t f) const;
+	bool faceVisibleFrom(const Eigen::Vector3d &camera_t, std::size_t f) const;
 	bool plausible(const Pose &pose) const;
 	std::uint32_t frontLeds(const Pose &pose) const;
 	std::uint32_t predictedLeds(const Pose &pose, double margin_px) const;
