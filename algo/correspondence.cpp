@@ -177,6 +177,7 @@ void Correspondence::findTriangleModels()
 					tm.model_mm[k] = target_.points_mm[led];
 				}
 				p3pSides(tm.model_mm.data(), tm.sides_mm2.data());
+				tm.p3p = p3pModel(tm.model_mm.data());
 				tm.sides_class = static_cast<int>(triangle_models_.size());
 				for (const TriangleModel &other : triangle_models_) {
 					bool same = true;
@@ -356,8 +357,11 @@ bool Correspondence::faceVisible(const Pose &pose, std::size_t f) const
 /* The same from camera_t, the camera centre in the target frame (mm). */
 bool Correspondence::faceVisibleFrom(const Eigen::Vector3d &camera_t, std::size_t f) const
 {
-	const Eigen::Vector3d view = (camera_t - face_centres_[f]).normalized();
-	return normals_[f].dot(view) > cos_view_max_;
+	const Eigen::Vector3d view = camera_t - face_centres_[f];
+	/* From behind (or edge-on): no square root needed to say so. */
+	if (cos_view_max_ >= 0.0 && !(normals_[f].dot(view) > 0.0))
+		return false;
+	return normals_[f].dot(view.normalized()) > cos_view_max_;
 }
 
 /*
@@ -1426,7 +1430,7 @@ bool Correspondence::tryTriangle(const TriangleModel &triangle, const Eigen::Vec
 	const std::size_t f = triangle.face;
 	const std::uint32_t own_leds = triangle.leds;
 	Pose poses[4];
-	const int n = p3pPoses(triangle.model_mm.data(), q, depths, poses);
+	const int n = p3pPoses(triangle.p3p, q, depths, poses);
 	StaticVector<double, kMaxLeds> own_var_px2;
 	for (std::uint64_t bits = own_candidates; bits != 0; bits &= bits - 1)
 		own_var_px2.push_back(var_[static_cast<std::size_t>(std::countr_zero(bits))]);

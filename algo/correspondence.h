@@ -286,6 +286,7 @@ private:
 		std::array<Eigen::Vector3d, 3> model_mm;
 		std::array<double, 3> sides_mm2{}; /* p3pSides() */
 		int sides_class = 0; /* index of the first model triangle with these sides */
+		P3pModel p3p; /* model_mm, prepared for p3pPoses() */
 	};
 	static constexpr std::size_t kMaxTriangleModels = kMaxFaces * 8;
 	void findTriangleModels();

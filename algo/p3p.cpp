@@ -195,14 +195,32 @@ void solveP3pDepths(const Eigen::Vector2d xy[3], const double sides_mm2[3], P3pD
  * for congruent triangles, where Horn's least squares would give the same
  * pose through a 4x4 eigen-solve; each result is checked against the rays.
  */
+P3pModel p3pModel(const Eigen::Vector3d model_mm[3])
+{
+	P3pModel m;
+	Eigen::Matrix3d Fm = Eigen::Matrix3d::Identity();
+	for (int i = 0; i < 3; ++i)
+		m.model_mm[i] = model_mm[i];
+	m.ok = triangleFrame(model_mm, &Fm);
+	m.frame_t = Fm.transpose();
+	m.centroid_mm = (model_mm[0] + model_mm[1] + model_mm[2]) / 3.0;
+	return m;
+}
+
 int p3pPoses(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3],
 	     const P3pDepths &depths, Pose poses[4])
 {
-	Eigen::Matrix3d Fm;
-	if (depths.n == 0 || !triangleFrame(model_mm, &Fm))
+	return p3pPoses(p3pModel(model_mm), xy, depths, poses);
+}
+
+int p3pPoses(const P3pModel &model, const Eigen::Vector2d xy[3], const P3pDepths &depths,
+	     Pose poses[4])
+{
+	if (depths.n == 0 || !model.ok)
 		return 0;
-	const Eigen::Matrix3d FmT = Fm.transpose();
-	const Eigen::Vector3d m_bar = (model_mm[0] + model_mm[1] + model_mm[2]) / 3.0;
+	const Eigen::Matrix3d &FmT = model.frame_t;
+	const Eigen::Vector3d &m_bar = model.centroid_mm;
+	const Eigen::Vector3d *model_mm = model.model_mm;
 	double fit2[3];
 	for (int i = 0; i < 3; ++i) {
 		const double tol = 1e-7 * (1.0 + xy[i].norm());

@@ -44,4 +44,19 @@ void solveP3pDepths(const Eigen::Vector2d xy[3], const double sides_mm2[3], P3pD
 int p3pPoses(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3],
 	     const P3pDepths &depths, Pose poses[4]);
 
+/*
+ * What p3pPoses() needs of a model triangle, computed once for a triangle
+ * solved many times (the frame built on it, its centroid). ok: false for a
+ * degenerate (collinear) triangle, which gives no pose.
+ */
+struct P3pModel {
+	Eigen::Vector3d model_mm[3];
+	Eigen::Matrix3d frame_t; /* transposed orthonormal frame on the triangle */
+	Eigen::Vector3d centroid_mm;
+	bool ok = false;
+};
+P3pModel p3pModel(const Eigen::Vector3d model_mm[3]);
+int p3pPoses(const P3pModel &model, const Eigen::Vector2d xy[3], const P3pDepths &depths,
+	     Pose poses[4]);
+
 } /* namespace dockpose */
