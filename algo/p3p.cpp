@@ -220,7 +220,7 @@ int p3pPoses(const P3pModel &model, const Eigen::Vector2d xy[3], const P3pDepths
 		return 0;
 	const Eigen::Matrix3d &FmT = model.frame_t;
 	const Eigen::Vector3d &m_bar = model.centroid_mm;
-	const Eigen::Vector3d *model_mm = model.model_mm;
+	const Eigen::Vector3d *model_mm = model.model_mm.data();
 	double fit2[3];
 	for (int i = 0; i < 3; ++i) {
 		const double tol = 1e-7 * (1.0 + xy[i].norm());

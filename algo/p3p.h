@@ -12,6 +12,8 @@
  */
 #pragma once
 
+#include <array>
+
 #include <Eigen/Core>
 
 #include "algo/pose.h"
@@ -50,7 +52,7 @@ int p3pPoses(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3],
  * degenerate (collinear) triangle, which gives no pose.
  */
 struct P3pModel {
-	Eigen::Vector3d model_mm[3];
+	std::array<Eigen::Vector3d, 3> model_mm;
 	Eigen::Matrix3d frame_t; /* transposed orthonormal frame on the triangle */
 	Eigen::Vector3d centroid_mm;
 	bool ok = false;
