@@ -1384,16 +1384,21 @@ bool Correspondence::searchQuads(const NeighbourTable &table, const NeighbourTab
 					quadDeterminants(q, D);
 					for (std::size_t f = 0; f < target_.faces.size(); ++f)
 						for (int as = 0; as < 8; ++as) {
-							const int *vertex =
-								quad_assignments_
-									[f][static_cast<std::size_t>(
-										    as)]
-										.vertex.data();
-							if (!screenQuad(inv, f, vertex))
+							const QuadAssignment &qa = quad_assignments_
+								[f][static_cast<std::size_t>(as)];
+							/*
+							 * Seen from the front in one direction
+							 * round only (quadShape()'s sign rule,
+							 * D/A < 0): the other four assignments
+							 * are no hypotheses.
+							 */
+							if (!(D[0] * qa.area[0] < 0.0) ||
+							    !screenQuad(inv, f, qa.vertex.data()))
 								continue;
 							++hypotheses_;
 							if (quadShape(q, D, f, as) &&
-							    tryAssignment(order, f, vertex))
+							    tryAssignment(order, f,
+									  qa.vertex.data()))
 								return true;
 						}
 				}

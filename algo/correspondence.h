@@ -109,7 +109,10 @@ struct CorrespondenceConfig {
 	int triangle_neighbours = 6;
 	/* Centroid error (px) the invariant screen tolerates beyond the blob's own sigma. */
 	double screen_sigma_px = 1.0;
-	/* Screen at most this many (subset, face, assignment) hypotheses per frame, of them this many from triangles. */
+	/*
+	 * Screen at most this many (subset, face, assignment seeing the face from
+	 * its front) hypotheses per frame, of them this many from triangles.
+	 */
 	int max_hypotheses = 20000;
 	int max_triangle_hypotheses = 4000;
 	/* ... and verify (refine over all predicted LEDs) at most this many: the search's time bound. */

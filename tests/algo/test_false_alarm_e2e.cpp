@@ -227,5 +227,19 @@ TEST(StructuralRivals, ATruePoseJustPastItsChiSquareBoundKeepsItsExtraLeds)
 	EXPECT_FALSE(one.wrong);
 }
 
+/*
+ * The search's budget counts hypotheses: a quadrilateral's four assignments
+ * that see a face from behind are none (quadShape()'s sign rule refuses them
+ * at once). A five-face pyramid at 242 mm among 20 reflections spent its
+ * 20 000 on them as well and stopped before the true face (error_too_large);
+ * it is found now.
+ */
+TEST(SearchBudget, AssignmentsThatSeeAFaceFromBehindAreNoHypotheses)
+{
+	const OneFrame one = solveOneFrame("pyramid.json", 250, 2026, -4.0);
+	EXPECT_TRUE(one.correct);
+	EXPECT_FALSE(one.wrong);
+}
+
 } /* namespace */
 } /* namespace dockpose */
