@@ -640,10 +640,12 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 /*
  * log10 of the number of hypotheses one family of the full search can form
  * from this frame's candidates: every candidate anchors the quadrilaterals of
- * three of its neighbours (8 assignments to each face), once among every
- * candidate and once among the clipped spots alone (searchQuads()), or the
- * triangles of two (for each face, 4 hidden vertices, 6 assignments and 2
- * starts). Duplicates are counted, so this bounds the search from above,
+ * three of its neighbours (4 assignments to each face: of the 8, the 4 that go
+ * round the other way would see the face from behind and are never formed),
+ * once among every candidate and once among the clipped spots alone
+ * (searchQuads()), or the triangles of two (for each face, 4 hidden vertices,
+ * 3 assignments, the one direction round that sees the face from its front,
+ * and 2 starts). Duplicates are counted, so this bounds the search from above,
  * as does C(candidates, 4) for the quadrilaterals, each set of four formed at
  * most once; the factor 2 shares the false-alarm budget between the two
  * families.
@@ -655,13 +657,13 @@ double Correspondence::log10Tests(bool triangles) const
 	auto quads = [&](int members) {
 		const double m = members;
 		const double k = std::min(config_.neighbours, std::max(members - 1, 0));
-		return m * k * (k - 1.0) * (k - 2.0) / 6.0 * faces * 8.0;
+		return m * k * (k - 1.0) * (k - 2.0) / 6.0 * faces * 4.0;
 	};
 	double n = 0.0;
 	if (triangles) {
 		const double m = candidates;
 		const double k = std::min(config_.triangle_neighbours, std::max(candidates - 1, 0));
-		n = m * 0.5 * k * (k - 1.0) * faces * 96.0;
+		n = m * 0.5 * k * (k - 1.0) * faces * 48.0;
 	} else {
 		/*
 		 * The clipped spots' pass counts as a second one over every
@@ -675,7 +677,7 @@ double Correspondence::log10Tests(bool triangles) const
 			second = quads(std::popcount(clipped_bits_));
 		/* Each set of four is formed once, in one pass or the other. */
 		n = std::min(quads(candidates) + second,
-			     std::pow(10.0, log10Choose(candidates, 4)) * faces * 8.0);
+			     std::pow(10.0, log10Choose(candidates, 4)) * faces * 4.0);
 	}
 	return std::log10(2.0 * std::max(n, 1.0));
 }

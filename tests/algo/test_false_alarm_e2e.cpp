@@ -241,5 +241,19 @@ TEST(SearchBudget, AssignmentsThatSeeAFaceFromBehindAreNoHypotheses)
 	EXPECT_FALSE(one.wrong);
 }
 
+/*
+ * One face of the five-face pyramid alone, 507 mm away, nothing else in the
+ * frame: log10 NFA -4.26 with the tests counted as the search forms them (4
+ * assignments of a quadrilateral to each face, the direction round that sees
+ * it from its front), -3.96 when the 4 the search never forms were counted
+ * too, and the frame gave no pose.
+ */
+TEST(SearchBudget, TheBoundCountsOnlyTheHypothesesTheSearchForms)
+{
+	const OneFrame one = solveOneFrame("pyramid.json", 833, 2026, -4.0);
+	EXPECT_TRUE(one.correct);
+	EXPECT_FALSE(one.wrong);
+}
+
 } /* namespace */
 } /* namespace dockpose */
