@@ -168,22 +168,80 @@ OneFrame solveOneFrame(const char *target_file, int frame, std::uint64_t seed, d
 }
 
 /*
- * A far box corner (1.42 m, 6 spots, nothing else in the frame): five of the
- * six fit a wrong pose as their covariance predicts (log10 NFA -8.3), two
- * hypotheses before the true pose explains all six. An early exit there
- * returned the wrong pose (beside a six-LED copy that fits only within the
- * px floor); the exit now waits while a candidate near the target is left
- * unexplained, and the true pose is found.
+ * Single frames of the 20 000-frame runs (docs/accuracy.md: `--frames 5000
+ * --scenario mix --any-side --seed 2026`, cam512) that a rule of the search
+ * turned from no pose (or a wrong one) into the true pose, at the default
+ * bound; each case fails without its rule.
  */
-TEST(StructuralRivals, TheEarlyExitWaitsForACandidateLeftNearTheTarget)
+struct SolvedFrame {
+	const char *rule;
+	const char *target;
+	int frame;
+};
+const SolvedFrame kSolvedFrames[] = {
+	/*
+	 * A far box corner (1.42 m, 6 spots, nothing else in the frame): five of
+	 * the six fit a wrong pose as their covariance predicts (log10 NFA -8.3),
+	 * two hypotheses before the true pose explains all six. An early exit
+	 * there returned the wrong pose (beside a six-LED copy that fits only
+	 * within the px floor); the exit now waits while a candidate near the
+	 * target is left unexplained.
+	 */
+	{ "TheEarlyExitWaitsForACandidateLeftNearTheTarget", "corner.json", 4123 },
+	/*
+	 * A box corner at 378 mm, five spots, nothing else in the frame: a wrong
+	 * pose explained all five with one LED seen at 89 degrees from its face's
+	 * normal (edge-on, where it makes no spot), at log10 NFA -11.4 against the
+	 * true pose's -11.0, and the frame was ambiguous. An LED may now be
+	 * matched only where the pose predicts it visible (max_view_angle_deg).
+	 */
+	{ "AnLedSeenEdgeOnExplainsNoSpot", "corner.json", 1450 },
+	/*
+	 * The other side of the rule below: a box corner at 488 mm, six spots, the
+	 * true pose on all six (log10 NFA -14.4) within the px floor (0.05 px) at
+	 * chi2 33, just past its 99.9 % point (22.7), beside a four-LED pose that
+	 * fits its covariance (chi2 1.5, log10 NFA -4.0) and leaves two of the
+	 * spots unexplained. The frame was ambiguous; a fewer-LED rival now counts
+	 * only against a pose whose error is beyond twice what its covariance
+	 * predicts.
+	 */
+	{ "ATruePoseJustPastItsChiSquareBoundKeepsItsExtraLeds", "corner.json", 1928 },
+	/*
+	 * A five-face pyramid at 242 mm among 20 reflections: the budget counted a
+	 * quadrilateral's four assignments that see a face from behind
+	 * (quadShape()'s sign rule refuses them at once), spent its 20 000 on them
+	 * as well and stopped before the true face (error_too_large). They are no
+	 * hypotheses now.
+	 */
+	{ "AssignmentsThatSeeAFaceFromBehindAreNoHypotheses", "pyramid.json", 250 },
+	/*
+	 * One face of the pyramid alone, 507 mm away, nothing else in the frame:
+	 * log10 NFA -4.26 with the tests counted as the search forms them (4
+	 * assignments of a quadrilateral to each face), -3.96 when the 4 it never
+	 * forms were counted too, and the frame gave no pose.
+	 */
+	{ "TheBoundCountsOnlyTheHypothesesTheSearchForms", "pyramid.json", 833 },
+};
+
+class SolvedFrames : public ::testing::TestWithParam<SolvedFrame>
 {
-	const OneFrame one = solveOneFrame("corner.json", 4123, 2026, -4.0);
-	EXPECT_TRUE(one.correct);
-	EXPECT_FALSE(one.wrong);
+};
+
+TEST_P(SolvedFrames, TheTruePoseIsFound)
+{
+	const SolvedFrame &s = GetParam();
+	const OneFrame one = solveOneFrame(s.target, s.frame, 2026, -4.0);
+	EXPECT_TRUE(one.correct) << s.rule;
+	EXPECT_FALSE(one.wrong) << s.rule;
 }
 
+INSTANTIATE_TEST_SUITE_P(OneFrame, SolvedFrames, ::testing::ValuesIn(kSolvedFrames),
+			 [](const ::testing::TestParamInfo<SolvedFrame> &param_info) {
+				 return std::string(param_info.param.rule);
+			 });
+
 /*
- * The box corner half-turned in a combined-scenario frame: six LEDs within
+ * The rule the case above bounds: the box corner half-turned in a combined-scenario frame: six LEDs within
  * the px floor (0.21 px) but not as their covariance predicts, while a pose
  * on fewer LEDs fits it. At the bound 10^-2 (log10 NFA -3.0) the half-turned
  * copy was reported; a rival that fits the covariance now counts although it
@@ -194,65 +252,6 @@ TEST(StructuralRivals, AFitWithinThePxFloorYieldsToOneThatFitsTheCovariance)
 	const OneFrame one = solveOneFrame("corner.json", 61, 7, -2.0);
 	EXPECT_FALSE(one.wrong);
 	EXPECT_EQ(one.status, PoseStatus::Ambiguous);
-}
-
-/*
- * A box corner at 378 mm, five spots, nothing else in the frame: a wrong pose
- * explained all five with one LED seen at 89 degrees from its face's normal
- * (edge-on, where it makes no spot), at log10 NFA -11.4 against the true
- * pose's -11.0, and the frame was ambiguous. An LED may now be matched only
- * where the pose predicts it visible (within max_view_angle_deg): the wrong
- * pose keeps four LEDs and the true one is chosen.
- */
-TEST(StructuralRivals, AnLedSeenEdgeOnExplainsNoSpot)
-{
-	const OneFrame one = solveOneFrame("corner.json", 1450, 2026, -4.0);
-	EXPECT_TRUE(one.correct);
-	EXPECT_FALSE(one.wrong);
-}
-
-/*
- * The other side of the rule above: a box corner at 488 mm, six spots, the
- * true pose on all six (log10 NFA -14.4) fitting within the px floor (0.05
- * px) at chi2 33, just past its 99.9 % point (22.7), beside a four-LED pose
- * that fits its covariance (chi2 1.5, log10 NFA -4.0) and leaves two of the
- * spots unexplained. The frame was ambiguous; a fewer-LED rival now counts
- * only against a pose whose error is beyond twice what its covariance
- * predicts.
- */
-TEST(StructuralRivals, ATruePoseJustPastItsChiSquareBoundKeepsItsExtraLeds)
-{
-	const OneFrame one = solveOneFrame("corner.json", 1928, 2026, -4.0);
-	EXPECT_TRUE(one.correct);
-	EXPECT_FALSE(one.wrong);
-}
-
-/*
- * The search's budget counts hypotheses: a quadrilateral's four assignments
- * that see a face from behind are none (quadShape()'s sign rule refuses them
- * at once). A five-face pyramid at 242 mm among 20 reflections spent its
- * 20 000 on them as well and stopped before the true face (error_too_large);
- * it is found now.
- */
-TEST(SearchBudget, AssignmentsThatSeeAFaceFromBehindAreNoHypotheses)
-{
-	const OneFrame one = solveOneFrame("pyramid.json", 250, 2026, -4.0);
-	EXPECT_TRUE(one.correct);
-	EXPECT_FALSE(one.wrong);
-}
-
-/*
- * One face of the five-face pyramid alone, 507 mm away, nothing else in the
- * frame: log10 NFA -4.26 with the tests counted as the search forms them (4
- * assignments of a quadrilateral to each face, the direction round that sees
- * it from its front), -3.96 when the 4 the search never forms were counted
- * too, and the frame gave no pose.
- */
-TEST(SearchBudget, TheBoundCountsOnlyTheHypothesesTheSearchForms)
-{
-	const OneFrame one = solveOneFrame("pyramid.json", 833, 2026, -4.0);
-	EXPECT_TRUE(one.correct);
-	EXPECT_FALSE(one.wrong);
 }
 
 } /* namespace */
