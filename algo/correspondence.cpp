@@ -171,13 +171,14 @@ void Correspondence::findTriangleModels()
 				if (!(cross2(plane[tm.vertex[1]] - plane[tm.vertex[0]],
 					     plane[tm.vertex[2]] - plane[tm.vertex[0]]) < 0.0))
 					continue;
+				Eigen::Vector3d model_mm[3];
 				for (int k = 0; k < 3; ++k) {
 					const int led = target_.faces[f][tm.vertex[k]];
 					tm.leds |= 1u << led;
-					tm.model_mm[k] = target_.points_mm[led];
+					model_mm[k] = target_.points_mm[led];
 				}
-				p3pSides(tm.model_mm.data(), tm.sides_mm2.data());
-				tm.p3p = p3pModel(tm.model_mm.data());
+				p3pSides(model_mm, tm.sides_mm2.data());
+				tm.p3p = p3pModel(model_mm);
 				tm.sides_class = static_cast<int>(triangle_models_.size());
 				for (const TriangleModel &other : triangle_models_) {
 					bool same = true;

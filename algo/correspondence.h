@@ -287,10 +287,9 @@ private:
 		std::size_t face = 0;
 		std::array<int, 3> vertex{}; /* face-local, in the order of the image points */
 		std::uint32_t leds = 0; /* bit mask */
-		std::array<Eigen::Vector3d, 3> model_mm;
 		std::array<double, 3> sides_mm2{}; /* p3pSides() */
 		int sides_class = 0; /* index of the first model triangle with these sides */
-		P3pModel p3p; /* model_mm, prepared for p3pPoses() */
+		P3pModel p3p; /* its three LEDs (mm), prepared for p3pPoses() */
 	};
 	static constexpr std::size_t kMaxTriangleModels = kMaxFaces * 8;
 	void findTriangleModels();

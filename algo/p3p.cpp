@@ -207,12 +207,6 @@ P3pModel p3pModel(const Eigen::Vector3d model_mm[3])
 	return m;
 }
 
-int p3pPoses(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3],
-	     const P3pDepths &depths, Pose poses[4])
-{
-	return p3pPoses(p3pModel(model_mm), xy, depths, poses);
-}
-
 int p3pPoses(const P3pModel &model, const Eigen::Vector2d xy[3], const P3pDepths &depths,
 	     Pose poses[4])
 {
@@ -274,7 +268,7 @@ int solveP3p(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3], Pos
 	p3pSides(model_mm, sides);
 	P3pDepths depths;
 	solveP3pDepths(xy, sides, &depths);
-	return p3pPoses(model_mm, xy, depths, poses);
+	return p3pPoses(p3pModel(model_mm), xy, depths, poses);
 }
 
 } /* namespace dockpose */

@@ -42,10 +42,6 @@ struct P3pDepths {
 /* Squared side lengths opposite model points 0, 1, 2 (mm^2): the key of the depths. */
 void p3pSides(const Eigen::Vector3d model_mm[3], double sides_mm2[3]);
 void solveP3pDepths(const Eigen::Vector2d xy[3], const double sides_mm2[3], P3pDepths *depths);
-/* solveP3p()'s poses from the depths solved for this model triangle's sides. */
-int p3pPoses(const Eigen::Vector3d model_mm[3], const Eigen::Vector2d xy[3],
-	     const P3pDepths &depths, Pose poses[4]);
-
 /*
  * What p3pPoses() needs of a model triangle, computed once for a triangle
  * solved many times (the frame built on it, its centroid). ok: false for a
@@ -58,6 +54,7 @@ struct P3pModel {
 	bool ok = false;
 };
 P3pModel p3pModel(const Eigen::Vector3d model_mm[3]);
+/* solveP3p()'s poses from the depths solved for this model triangle's sides. */
 int p3pPoses(const P3pModel &model, const Eigen::Vector2d xy[3], const P3pDepths &depths,
 	     Pose poses[4]);
 

@@ -102,7 +102,7 @@ TEST(P3p, CongruentTrianglesShareTheirDepths)
 	/* The two-step solution is solveP3p's. */
 	Pose direct[4], stepwise[4];
 	const int n = solveP3p(model, xy, direct);
-	ASSERT_EQ(p3pPoses(model, xy, depths, stepwise), n);
+	ASSERT_EQ(p3pPoses(p3pModel(model), xy, depths, stepwise), n);
 	bool truth_found = false;
 	for (int k = 0; k < n; ++k) {
 		EXPECT_LT((direct[k].R - stepwise[k].R).norm(), 1e-12);
@@ -114,7 +114,7 @@ TEST(P3p, CongruentTrianglesShareTheirDepths)
 
 	/* The copy's poses from the same depths: one of them is truth o move^-1. */
 	Pose copies[4];
-	const int m = p3pPoses(copy, xy, depths, copies);
+	const int m = p3pPoses(p3pModel(copy), xy, depths, copies);
 	ASSERT_EQ(m, n);
 	Pose expected;
 	expected.R = truth.R * move.R.transpose();
