@@ -55,10 +55,13 @@
  *
  * The search stops early once a verified pose's NFA is below
  * early_exit_log10_nfa and its residuals are what the centroids' covariance
- * predicts, and it leaves no candidate near the target unexplained: no chance
- * competitor can come close, and the structural ones are generated
- * explicitly. (A pose that fits only within max_rms_px does not stop the
- * search: it may be a near-congruent copy of the true pose.)
+ * predicts, and it leaves no candidate near the target unexplained or
+ * explains every LED of the model: no chance competitor can come close, and
+ * the structural ones are generated explicitly. (A pose that fits only
+ * within max_rms_px does not stop the search: it may be a near-congruent
+ * copy of the true pose.) One that leaves a candidate near the target
+ * unexplained narrows the rest of the search to the candidates near the
+ * target, where a pose explaining that candidate too would rest.
  *
  * Tracking: with a previous pose, predicted LED positions are matched first;
  * the full search runs only when that fails.
@@ -234,8 +237,16 @@ private:
 	bool errorExplained(const Hypothesis &hypothesis, double slack) const;
 	static double chi2Bound(int points);
 	bool fitStatistical(const Hypothesis &hypothesis, double slack) const;
-	bool earlyExit(const Hypothesis &hypothesis) const;
-	bool candidateLeftOver(const Hypothesis &hypothesis) const;
+	bool earlyExit(const Hypothesis &hypothesis);
+	std::uint64_t nearTarget(const Hypothesis &hypothesis) const;
+	/* Are the candidates idx[0..n) all in focus_ (see earlyExit())? */
+	bool inFocus(const int *idx, int n) const
+	{
+		for (int k = 0; k < n; ++k)
+			if (!(focus_ & (std::uint64_t{ 1 } << idx[k])))
+				return false;
+		return true;
+	}
 	bool samePose(const Pose &a, const Pose &b) const;
 	double sizePx(const Pose &pose) const;
 	double gatePx(const Pose &pose) const;
@@ -389,6 +400,12 @@ private:
 	StaticVector<Hypothesis, kMaxKept> kept_;
 	int hypotheses_ = 0;
 	bool budget_hit_ = false;
+	/*
+	 * The candidates (bits: indices) a search that found a pose still
+	 * forms hypotheses from, while focused_ (earlyExit()); all before.
+	 */
+	std::uint64_t focus_ = ~std::uint64_t{ 0 };
+	bool focused_ = false;
 	int verified_ = 0;
 	int triangle_leds_ = 4; /* triangleLeds(), while the triangle search runs */
 };
