@@ -1196,8 +1196,11 @@ bool Correspondence::verify(const Pose &pose, std::size_t f, const Eigen::Vector
  * pose explains all six (-15). Then the search goes on, but only over the
  * hypotheses formed from candidates near the target (focus_): the true pose's
  * spots lie there, which is what the test assumed, and a rival elsewhere is a
- * chance match the bound below the margin already answers. In clutter this
- * skips most of the budget a frame with its pose found would have spent.
+ * chance match the bound below the margin already answers. A pose on every
+ * LED of the model stops the search whatever lies near it: no competitor can
+ * explain more, and its near-congruent copies on the same spots are
+ * generated afterwards (addCompetitors()). In clutter this skips most of the
+ * budget a frame with its pose found would have spent.
  */
 bool Correspondence::earlyExit(const Hypothesis &h)
 {
