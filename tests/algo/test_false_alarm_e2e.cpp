@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <string>
 #include <tuple>
 
@@ -139,31 +140,42 @@ struct OneFrame {
 	PoseStatus status = PoseStatus::NoFrame;
 };
 
-OneFrame solveOneFrame(const char *target_file, int frame, std::uint64_t seed, double max_log10_nfa)
+/*
+ * Frame `frame` of evaluate()'s sequence for `e` (its scenario and seed),
+ * solved alone with `pipeline`: its outcome to `visit`, once.
+ */
+void solveFrame(const char *target_file, const char *camera_file, const PipelineConfig &pipeline,
+		EvaluationConfig e, int frame,
+		const std::function<void(const FrameOutcome &)> &visit)
 {
 	const auto target = loadTargetModel(test::dataPath(target_file));
-	const auto camera = loadCameraIntrinsics(test::dataPath("cam512.json"));
-	EXPECT_TRUE(target.isOk() && camera.isOk()) << target_file;
-	OneFrame one;
-	if (!target.isOk() || !camera.isOk())
-		return one;
+	const auto camera = loadCameraIntrinsics(test::dataPath(camera_file));
+	ASSERT_TRUE(target.isOk() && camera.isOk()) << target_file << ", " << camera_file;
+	e.first_frame = frame;
+	e.frames = 1;
+	const EvaluationTally t = evaluate(target.value(), camera.value(), pipeline, e,
+					   [&](const FrameOutcome &o, const Image &) {
+						   EXPECT_EQ(o.index, frame);
+						   visit(o);
+					   });
+	EXPECT_EQ(t.frames, 1);
+}
+
+OneFrame solveOneFrame(const char *target_file, int frame, std::uint64_t seed, double max_log10_nfa)
+{
 	PipelineConfig pipeline;
 	pipeline.correspondence.max_log10_nfa = max_log10_nfa;
 	EvaluationConfig e;
 	e.scenario = Scenario::Mix;
 	e.any_side = true;
 	e.seed = seed;
-	e.first_frame = frame;
-	e.frames = 1;
-	const EvaluationTally t = evaluate(target.value(), camera.value(), pipeline, e,
-					   [&](const FrameOutcome &o, const Image &) {
-						   EXPECT_EQ(o.index, frame);
-						   one.found = o.result->found;
-						   one.status = o.result->status;
-						   one.correct = o.correct;
-						   one.wrong = o.wrong;
-					   });
-	EXPECT_EQ(t.frames, 1);
+	OneFrame one;
+	solveFrame(target_file, "cam512.json", pipeline, e, frame, [&](const FrameOutcome &o) {
+		one.found = o.result->found;
+		one.status = o.result->status;
+		one.correct = o.correct;
+		one.wrong = o.wrong;
+	});
 	return one;
 }
 
@@ -279,26 +291,18 @@ struct Solved {
 
 Solved solveHeavyClutter(int frame, double early_exit_log10_nfa)
 {
-	const auto target = loadTargetModel(test::dataPath("wedge.json"));
-	const auto camera = loadCameraIntrinsics(test::dataPath("cam1456.json"));
-	Solved s;
-	EXPECT_TRUE(target.isOk() && camera.isOk());
-	if (!target.isOk() || !camera.isOk())
-		return s;
 	PipelineConfig pipeline;
 	pipeline.correspondence.early_exit_log10_nfa = early_exit_log10_nfa;
 	EvaluationConfig e;
 	e.scenario = Scenario::HeavyClutter;
 	e.seed = 43;
-	e.first_frame = frame;
-	e.frames = 1;
-	evaluate(target.value(), camera.value(), pipeline, e,
-		 [&](const FrameOutcome &o, const Image &) {
-			 s.correct = o.correct;
-			 s.pose.R = o.result->R;
-			 s.pose.t_mm = o.result->t_mm;
-			 s.hypotheses = o.result->hypotheses;
-		 });
+	Solved s;
+	solveFrame("wedge.json", "cam1456.json", pipeline, e, frame, [&](const FrameOutcome &o) {
+		s.correct = o.correct;
+		s.pose.R = o.result->R;
+		s.pose.t_mm = o.result->t_mm;
+		s.hypotheses = o.result->hypotheses;
+	});
 	return s;
 }
 
