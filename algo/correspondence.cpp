@@ -647,10 +647,10 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
  * (searchQuads()), or the triangles of two (for each face, 4 hidden vertices;
  * 3 assignments, the one direction round that sees the face from its front;
  * 2 starts; and 2 poses per assignment, P3P's mean number of solutions on the
- * cold-search benchmark's frames, of up to 4). Duplicates are counted, so this bounds the search from above,
- * as does C(candidates, 4) for the quadrilaterals, each set of four formed at
- * most once; the factor 2 shares the false-alarm budget between the two
- * families.
+ * cold-search benchmark's frames, of up to 4). Duplicates are counted, so
+ * this bounds the search from above, as does C(candidates, 4) for the
+ * quadrilaterals, each set of four formed at most once; the factor 2 shares
+ * the false-alarm budget between the two families.
  */
 double Correspondence::log10Tests(bool triangles) const
 {
@@ -1206,11 +1206,13 @@ bool Correspondence::earlyExit(const Hypothesis &h)
 {
 	if (!acceptable(h) || !fitStatistical(h, 1.0) || h.log10_nfa > early_exit_log10_nfa_)
 		return false;
+	if (h.match.pairs.size() == target_.points_mm.size())
+		return true;
 	std::uint64_t used = 0;
 	for (const auto &pair : h.match.pairs)
 		used |= std::uint64_t{ 1 } << static_cast<std::uint8_t>(pair[1]);
 	const std::uint64_t near = nearTarget(h);
-	if ((near & ~used) == 0 || h.match.pairs.size() == target_.points_mm.size())
+	if ((near & ~used) == 0)
 		return true;
 	focus_ = focused_ ? (focus_ | near) : near;
 	focused_ = true;

@@ -45,10 +45,10 @@
  * within max_rms_px, and no other, different pose explains the image as well
  * (else Ambiguous; one on fewer LEDs does when it fits the centroids'
  * covariance and the chosen pose misfits it by more than twice, fitting only
- * max_rms_px): the competitors are the
- * other hypotheses kept, the model's near-congruences of faces applied to
- * the chosen pose (a box corner half-turned maps six of its seven LEDs onto
- * others), and, for a planar match, the mirror pose about the line of sight. Poses that differ only by a
+ * max_rms_px): the competitors are the other hypotheses kept, the model's
+ * near-congruences of faces applied to the chosen pose (a box corner
+ * half-turned maps six of its seven LEDs onto others), and, for a planar
+ * match, the mirror pose about the line of sight. Poses that differ only by a
  * symmetry of the target (e.g. the wedge's 180 degree turn about its axis)
  * are one pose: the one closest to the tracked pose, else to the model's own
  * orientation, is reported.
