@@ -6,9 +6,11 @@
  * One pass over the rows. In each row, background is skipped 64 and 16
  * bytes at a time with GCC vector extensions (SSE2 on x86-64, NEON on
  * aarch64, no intrinsics); the few blocks that hold a segmented pixel are
- * scanned pixel by pixel into runs (gaps of up to fill_gap_px filled). A
- * finished run is connected to the runs of the previous row that touch it
- * (8-connectivity: overlap after widening by one pixel), the provisional
+ * scanned pixel by pixel into runs (gaps of up to fill_gap_px filled); a
+ * 16-byte step visits only the bytes its comparison's bit mask marks (a
+ * window's short rows are mostly such steps and one overlapping the row's
+ * end). A finished run is connected to the runs of the previous row that
+ * touch it (8-connectivity: overlap after widening by one pixel), the provisional
  * labels merge in a union-find forest with path halving, and each root owns
  * the integer moment accumulator of its component (merged on union). At the
  * end the roots are compacted into the component list. No label image.
@@ -52,6 +54,21 @@ inline bool anyAtLeast(U8x16 v, U8x16 level)
 {
 	const U64x2 m = std::bit_cast<U64x2>(v >= level);
 	return (m[0] | m[1]) != 0;
+}
+
+/*
+ * Bit i set where byte i of v is >= the byte of level. Portable (no movemask
+ * on NEON): each 0x00/0xff byte keeps a distinct bit, and one multiply adds
+ * the eight bytes of a 64-bit lane into its top byte.
+ */
+inline std::uint32_t atLeastMask(U8x16 v, U8x16 level)
+{
+	const U64x2 m = std::bit_cast<U64x2>(v >= level);
+	constexpr std::uint64_t kBitOfByte = 0x8040201008040201ull;
+	constexpr std::uint64_t kSumBytes = 0x0101010101010101ull;
+	const std::uint64_t lo = ((m[0] & kBitOfByte) * kSumBytes) >> 56;
+	const std::uint64_t hi = ((m[1] & kBitOfByte) * kSumBytes) >> 56;
+	return static_cast<std::uint32_t>(lo | (hi << 8));
 }
 
 constexpr std::uint32_t kNoLabel = 0xffffffffu;
@@ -468,6 +485,16 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 			rx1 = x;
 		};
 
+		/* The segmented pixels of the 16 bytes v read at x (most such reads have none). */
+		auto hits = [&](int x, U8x16 v, U8x16 level, int skip = 0) {
+			if (!anyAtLeast(v, level))
+				return;
+			std::uint32_t mask = atLeastMask(v, level) >> skip << skip;
+			for (; mask != 0; mask &= mask - 1) {
+				const int xi = x + std::countr_zero(mask);
+				pixel(xi, p[xi], lrow[xi]);
+			}
+		};
 		auto scalar = [&](int x, int end) {
 			for (; x < end; ++x) {
 				if (p[x] >= lrow[x])
@@ -493,11 +520,17 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 			if (anyAtLeast(d, load16(lrow + x + 48)))
 				scalar(x + 48, x + 64);
 		}
-		for (; x + 16 <= wx1; x += 16) {
-			if (anyAtLeast(load16(p + x), load16(lrow + x)))
-				scalar(x, x + 16);
+		for (; x + 16 <= wx1; x += 16)
+			hits(x, load16(p + x), load16(lrow + x));
+		/* The last bytes: the 16 that end the row, those not read yet (a narrow window's rows are
+		 * mostly this tail). */
+		if (x < wx1) {
+			if (wx1 - wx0 < 16)
+				scalar(x, wx1);
+			else /* of those 16, the first 16 - (wx1 - x) were read above */
+				hits(wx1 - 16, load16(p + wx1 - 16), load16(lrow + wx1 - 16),
+				     16 - (wx1 - x));
 		}
-		scalar(x, wx1);
 		if (open)
 			close_run();
 		if (overflow)

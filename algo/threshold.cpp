@@ -120,6 +120,7 @@ Thresholder::Thresholder(int max_width, int max_height, const ThresholdConfig &c
 	medians_.assign(static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows), 0);
 	padded_.assign(static_cast<std::size_t>(cols + 2) * static_cast<std::size_t>(rows + 2), 0);
 	corners_.assign(static_cast<std::size_t>(cols + 1) * static_cast<std::size_t>(rows + 1), 0);
+	slopes_.assign(static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows), SlopeFit{});
 }
 
 const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats *stats)
@@ -129,6 +130,9 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 	*st = ThresholdStats{};
 
 	cols_ = rows_ = 0;
+	/* Every kept slope fit is of the last map (wrapping past 0, which no fit carries). */
+	if (++generation_ == 0)
+		generation_ = 1;
 	if (!image.valid() || image.width > max_width_ || image.height > max_height_) {
 		map_.setUniform(255);
 		st->level_min = st->level_max = 255;
@@ -477,6 +481,18 @@ bool Thresholder::backgroundSlope(double u_px, double v_px, double *gx, double *
 	const int pcols = cols_ + 2;
 	const int c_at = std::clamp(static_cast<int>(u_px) / tile, 0, cols_ - 1);
 	const int r_at = std::clamp(static_cast<int>(v_px) / tile, 0, rows_ - 1);
+	SlopeFit &fit = slopes_[static_cast<std::size_t>(r_at) * cols_ + c_at];
+	if (fit.generation == generation_) {
+		*gx = fit.gx;
+		*gy = fit.gy;
+		*sigma = fit.sigma;
+		return fit.ok;
+	}
+	fit = SlopeFit{};
+	fit.generation = generation_;
+	/* The slope and its variance do not depend on the pixel: the plane about the tile's centre. */
+	u_px = c_at * tile + 0.5 * (std::min(tile, width_ - c_at * tile) - 1);
+	v_px = r_at * tile + 0.5 * (std::min(tile, height_ - r_at * tile) - 1);
 	const int c0 = std::max(c_at - 2, 0), c1 = std::min(c_at + 2, cols_ - 1);
 	const int r0 = std::max(r_at - 2, 0), r1 = std::min(r_at + 2, rows_ - 1);
 	/* Least squares b = a + gx (x - u) + gy (y - v) over the tiles' centres. */
@@ -515,10 +531,11 @@ bool Thresholder::backgroundSlope(double u_px, double v_px, double *gx, double *
 	/* Residual variance of one tile's background, at least its rounding to a level. */
 	const double ssr = b2sum - (p0 * t[0] + p1 * t[1] + p2 * t[2]);
 	const double var_b = std::max(n > 3 ? ssr / (n - 3) : 0.0, 1.0 / 12.0);
-	*gx = p1;
-	*gy = p2;
+	fit.gx = *gx = p1;
+	fit.gy = *gy = p2;
 	/* The larger of the two slopes' variances: var_b (A^-1)_kk. */
-	*sigma = std::sqrt(var_b * std::max(c11, c22) / det);
+	fit.sigma = *sigma = std::sqrt(var_b * std::max(c11, c22) / det);
+	fit.ok = true;
 	return true;
 }
 

@@ -176,7 +176,9 @@ public:
 	 * tiles around it, its gradient (gx, gy) in levels per pixel, and the
 	 * 1-sigma of each component from the fit's residuals (at least the
 	 * backgrounds' quantisation). False when there is no such background
-	 * (Fixed mode, an invalid frame, fewer than 2 x 2 tiles).
+	 * (Fixed mode, an invalid frame, fewer than 2 x 2 tiles). The fit
+	 * depends only on the tile holding the pixel: it is made once per tile
+	 * and compute(), and kept (so: the frame thread only).
 	 * Allocates: never.
 	 */
 	bool backgroundSlope(double u_px, double v_px, double *gx, double *gy, double *sigma) const;
@@ -213,6 +215,14 @@ private:
 	std::vector<std::uint8_t> medians_;
 	std::vector<std::int32_t> padded_;
 	std::vector<std::int32_t> corners_;
+	/* backgroundSlope()'s fit by tile, valid while its generation is compute()'s. */
+	struct SlopeFit {
+		double gx = 0.0, gy = 0.0, sigma = 0.0;
+		std::uint32_t generation = 0;
+		bool ok = false;
+	};
+	mutable std::vector<SlopeFit> slopes_;
+	std::uint32_t generation_ = 1;
 	/* Histograms of absolute differences (4 banks to break store dependencies). */
 	std::array<std::array<std::uint32_t, 256>, 4> diff_hist_{};
 };

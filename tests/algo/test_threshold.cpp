@@ -413,12 +413,16 @@ TEST(Threshold, TileAndStepConfiguration)
 	EXPECT_GE(stats.level_min, 60 + 12 - 4);
 }
 
-/* The background's slope around a point: a plane through the tile backgrounds, with an honest sigma. */
+/*
+ * The background's slope around a point: a plane through the tile backgrounds, with an honest
+ * sigma. One thresholder sees every plane in turn: the fits it keeps by tile follow each compute().
+ */
 TEST(Threshold, BackgroundSlopeOfAPlane)
 {
 	const int w = 800, h = 600;
 	std::mt19937 rng(8);
 	std::normal_distribution<double> noise(0.0, 2.0);
+	Thresholder t(w, h, ThresholdConfig{});
 	for (const auto &[gx, gy] :
 	     { std::pair{ 0.05, -0.03 }, std::pair{ 0.0, 0.0 }, std::pair{ -0.007, 0.002 } }) {
 		std::vector<std::uint8_t> pixels(static_cast<std::size_t>(w) * h);
@@ -428,12 +432,18 @@ TEST(Threshold, BackgroundSlopeOfAPlane)
 					static_cast<std::uint8_t>(std::clamp(
 						std::lround(60.0 + gx * x + gy * y + noise(rng)),
 						0L, 255L));
-		Thresholder t(w, h, ThresholdConfig{});
 		t.compute(ImageView{ pixels.data(), w, h, w });
 		for (const auto &[u, v] : { std::pair{ 400.0, 300.0 }, std::pair{ 10.0, 590.0 },
 					    std::pair{ 790.0, 5.0 } }) {
 			double sx = 0.0, sy = 0.0, sigma = 0.0;
 			ASSERT_TRUE(t.backgroundSlope(u, v, &sx, &sy, &sigma));
+			/* Another pixel of the same 64 px tile: the same fit. */
+			double sx2 = 0.0, sy2 = 0.0, sigma2 = 0.0;
+			ASSERT_TRUE(t.backgroundSlope(u + (u > 400.0 ? -20.0 : 20.0), v, &sx2, &sy2,
+						      &sigma2));
+			EXPECT_EQ(sx2, sx);
+			EXPECT_EQ(sy2, sy);
+			EXPECT_EQ(sigma2, sigma);
 			EXPECT_GT(sigma, 0.0);
 			EXPECT_LT(
 				sigma,
