@@ -566,14 +566,16 @@ bool Correspondence::refineMatched(const Pose &initial, Hypothesis *h, bool cova
 /*
  * From an initial pose: match with a first (wider) gate, refine, match again
  * with the normal gate, refine; then count what the pose predicts. Fails as
- * soon as fewer than min_matches LEDs match.
+ * soon as fewer than min_matches LEDs match. With covariance, every
+ * refinement gives the pose's covariance too (and fails where it is not
+ * determined): the tracked match, usually refined once, needs no second run.
  */
 bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int min_matches,
-				 Hypothesis *h) const
+				 Hypothesis *h, bool covariance) const
 {
 	if (matchPredicted(initial, first_gate_px, &h->match) < min_matches)
 		return false;
-	if (!refineMatched(initial, h, false))
+	if (!refineMatched(initial, h, covariance))
 		return false;
 	Pose pose = h->refined.pose;
 	for (int round = 0; round < 2; ++round) {
@@ -586,7 +588,7 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 		if (!changed)
 			break;
 		h->match = again;
-		if (!refineMatched(pose, h, false))
+		if (!refineMatched(pose, h, covariance))
 			return false;
 		pose = h->refined.pose;
 	}
@@ -616,14 +618,14 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 		for (std::size_t k = worst; k + 1 < trial.match.pairs.size(); ++k)
 			trial.match.pairs[k] = trial.match.pairs[k + 1];
 		trial.match.pairs.pop_back();
-		if (!refineMatched(pose, &trial, false))
+		if (!refineMatched(pose, &trial, covariance))
 			break;
 		/* Re-match from the cleaner pose: the LED may find its own blob now. */
 		Match again;
 		if (matchPredicted(trial.refined.pose, gatePx(trial.refined.pose), &again) >=
 		    min_matches) {
 			trial.match = again;
-			if (!refineMatched(trial.refined.pose, &trial, false))
+			if (!refineMatched(trial.refined.pose, &trial, covariance))
 				break;
 		}
 		if (trial.refined.rms_px >= h->refined.rms_px)
@@ -936,10 +938,10 @@ bool Correspondence::planarFlipExplains(const Hypothesis &h) const
  * model's own orientation; permute the matches accordingly and refine again
  * so the covariance belongs to the reported pose.
  */
-void Correspondence::canonicalise(const Pose *reference, Hypothesis *h) const
+bool Correspondence::canonicalise(const Pose *reference, Hypothesis *h) const
 {
 	if (symmetries_.size() < 2)
-		return;
+		return false;
 	const Eigen::Matrix3d ref = reference ? reference->R : Eigen::Matrix3d::Identity();
 	std::size_t best = 0;
 	double best_angle = std::numeric_limits<double>::max();
@@ -952,7 +954,7 @@ void Correspondence::canonicalise(const Pose *reference, Hypothesis *h) const
 		}
 	}
 	if (best == 0)
-		return;
+		return false;
 	const Symmetry &s = symmetries_[best];
 	/* P' = P o S: LED i of P' sits where LED perm[i] sits for P. */
 	std::array<int, kMaxLeds> inverse;
@@ -974,10 +976,11 @@ void Correspondence::canonicalise(const Pose *reference, Hypothesis *h) const
 			std::swap(permuted.pairs[j - 1], permuted.pairs[j]);
 	Hypothesis moved = *h;
 	moved.match = permuted;
-	if (refineMatched(start, &moved, false)) {
-		h->match = moved.match;
-		h->refined = moved.refined;
-	}
+	if (!refineMatched(start, &moved, false))
+		return false;
+	h->match = moved.match;
+	h->refined = moved.refined;
+	return true;
 }
 
 /* Keep the best few distinct hypotheses (for the ambiguity test). */
@@ -1783,10 +1786,10 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 		h.tracked = true;
 		const double gate = trackGatePx(*prediction);
 		h.track_gate_px = gate;
-		if (refineMatch(*prediction, gate, minLeds(true), &h) && acceptable(h) &&
+		if (refineMatch(*prediction, gate, minLeds(true), &h, true) && acceptable(h) &&
 		    !(planarMatch(h.match) && planarFlipExplains(h))) {
-			canonicalise(prediction, &h);
-			if (!refineMatched(h.refined.pose, &h, true))
+			if (canonicalise(prediction, &h) &&
+			    !refineMatched(h.refined.pose, &h, true))
 				return false;
 			result->found = true;
 			result->tracked = true;

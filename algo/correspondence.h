@@ -229,7 +229,7 @@ private:
 	std::uint32_t predictedLeds(const Pose &pose, double margin_px) const;
 	int matchPredicted(const Pose &pose, double gate_px, Match *match) const;
 	bool refineMatch(const Pose &initial, double first_gate_px, int min_matches,
-			 Hypothesis *hypothesis) const;
+			 Hypothesis *hypothesis, bool covariance = false) const;
 	bool refineMatched(const Pose &initial, Hypothesis *hypothesis, bool covariance) const;
 	bool acceptable(const Hypothesis &hypothesis) const;
 	bool better(const Hypothesis &a, const Hypothesis &b) const;
@@ -252,7 +252,8 @@ private:
 	double gatePx(const Pose &pose) const;
 	bool planarMatch(const Match &match) const;
 	bool planarFlipExplains(const Hypothesis &hypothesis) const;
-	void canonicalise(const Pose *reference, Hypothesis *hypothesis) const;
+	/* True when it moved the pose (refined again, without a covariance). */
+	bool canonicalise(const Pose *reference, Hypothesis *hypothesis) const;
 	void keep(const Hypothesis &hypothesis);
 	int minLeds(bool tracking) const;
 	/*

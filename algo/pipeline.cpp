@@ -93,6 +93,22 @@ void Pipeline::setFound(const CorrespondenceResult &match)
 	have_track_ = true;
 }
 
+/*
+ * The last pose moved on by the last frame-to-frame motion, in the camera's
+ * frame (x' = dR x + dt from the frame before to the last): the tracked
+ * match's start, so that its refinement starts where the windows are centred.
+ */
+Pose Pipeline::predictedPose() const
+{
+	if (!have_previous_)
+		return track_pose_;
+	const Eigen::Matrix3d dR = track_pose_.R * previous_pose_.R.transpose();
+	Pose next;
+	next.R = dR * track_pose_.R;
+	next.t_mm = track_pose_.t_mm + dR * (track_pose_.t_mm - previous_pose_.t_mm);
+	return next;
+}
+
 bool Pipeline::processWindows(const ImageView &frame)
 {
 	const CameraIntrinsics &k = camera_.intrinsics();
@@ -162,7 +178,8 @@ bool Pipeline::processWindows(const ImageView &frame)
 	for (const PixelWindow &w : windows_)
 		area += static_cast<double>(w.x1 - w.x0) * (w.y1 - w.y0);
 	CorrespondenceResult match;
-	if (!correspondence_.solve(blobs_, &track_pose_, &match,
+	const Pose prediction = predictedPose();
+	if (!correspondence_.solve(blobs_, &prediction, &match,
 				   SolveContext{ area, frame_candidates_ }) ||
 	    !match.found)
 		return false;
@@ -213,7 +230,8 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 	}
 
 	CorrespondenceResult match;
-	const Pose *prediction = (config_.tracking && have_track_) ? &track_pose_ : nullptr;
+	const Pose predicted = predictedPose();
+	const Pose *prediction = (config_.tracking && have_track_) ? &predicted : nullptr;
 	correspondence_.solve(blobs_, prediction, &match);
 	result_.hypotheses = match.hypotheses;
 	result_.verified = match.verified;

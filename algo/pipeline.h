@@ -127,6 +127,8 @@ private:
 	Pose track_pose_;
 	bool have_previous_ = false; /* the pose of the frame before track_pose_'s */
 	Pose previous_pose_;
+	/* The pose the next frame should show (constant velocity when it was measured). */
+	Pose predictedPose() const;
 	/* Regions of interest: this frame's windows, the last whole-frame pass, the spots' radius. */
 	StaticVector<PixelWindow, kMaxLeds> windows_;
 	int frames_since_full_ = 0;
