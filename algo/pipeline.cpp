@@ -95,17 +95,18 @@ void Pipeline::setFound(const CorrespondenceResult &match)
 
 /*
  * The last pose moved on by the last frame-to-frame motion, in the camera's
- * frame (x' = dR x + dt from the frame before to the last): the tracked
+ * frame (x' = turn x + shift from the frame before to the last): the tracked
  * match's start, so that its refinement starts where the windows are centred.
  */
 Pose Pipeline::predictedPose() const
 {
 	if (!have_previous_)
 		return track_pose_;
-	const Eigen::Matrix3d dR = track_pose_.R * previous_pose_.R.transpose();
+	/* The last frame-to-frame rotation, applied once more. */
+	const Eigen::Matrix3d turn = track_pose_.R * previous_pose_.R.transpose();
 	Pose next;
-	next.R = dR * track_pose_.R;
-	next.t_mm = track_pose_.t_mm + dR * (track_pose_.t_mm - previous_pose_.t_mm);
+	next.R = turn * track_pose_.R;
+	next.t_mm = track_pose_.t_mm + turn * (track_pose_.t_mm - previous_pose_.t_mm);
 	return next;
 }
 
