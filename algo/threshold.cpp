@@ -130,9 +130,12 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 	*st = ThresholdStats{};
 
 	cols_ = rows_ = 0;
-	/* Every kept slope fit is of the last map (wrapping past 0, which no fit carries). */
-	if (++generation_ == 0)
+	/* Every kept slope fit is of an earlier map (0: none; at the wrap, after 2^32 maps, all cleared). */
+	if (++generation_ == 0) {
+		for (SlopeFit &fit : slopes_)
+			fit.generation = 0;
 		generation_ = 1;
+	}
 	if (!image.valid() || image.width > max_width_ || image.height > max_height_) {
 		map_.setUniform(255);
 		st->level_min = st->level_max = 255;
