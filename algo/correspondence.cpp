@@ -646,7 +646,8 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
  * three of its neighbours (4 assignments to each face: of the 8, the 4 that go
  * round the other way would see the face from behind and are never formed),
  * once among every candidate and once among the clipped spots alone
- * (searchQuads()), or the triangles of two (for each face, 4 hidden vertices;
+ * (searchQuads()), or the triangles of two, as well once among each
+ * (searchTriangles(); for each face, 4 hidden vertices;
  * 3 assignments, the one direction round that sees the face from its front;
  * 2 starts; and 2 poses per assignment, P3P's mean number of solutions on the
  * cold-search benchmark's frames, of up to 4). Duplicates are counted, so
@@ -665,9 +666,19 @@ double Correspondence::log10Tests(bool triangles) const
 	};
 	double n = 0.0;
 	if (triangles) {
-		const double m = candidates;
-		const double k = std::min(config_.triangle_neighbours, std::max(candidates - 1, 0));
-		n = m * 0.5 * k * (k - 1.0) * faces * 48.0;
+		auto triangles_of = [&](int members) {
+			const double m = members;
+			const double k =
+				std::min(config_.triangle_neighbours, std::max(members - 1, 0));
+			return m * 0.5 * k * (k - 1.0) * faces * 48.0;
+		};
+		/* The clipped spots' triangles as the quadrilaterals' (below). */
+		double second = 0.0;
+		if (candidates > n_cand_)
+			second = triangles_of(candidates);
+		else if (clippedTriangles())
+			second = triangles_of(std::popcount(clipped_bits_));
+		n = triangles_of(candidates) + second;
 	} else {
 		/*
 		 * The clipped spots' pass counts as a second one over every
@@ -1307,6 +1318,19 @@ bool Correspondence::clippedPass() const
 	return clipped >= 4 && clipped < n_cand_;
 }
 
+/*
+ * Do the clipped spots' triangles run first: three of them at least, and
+ * fewer than the spots that do not clip? Where most spots clip (a sunlit
+ * patch, blooms) the clipped ones are no likelier the target's than any
+ * others, and their triangles would only take the budget of the search over
+ * every candidate.
+ */
+bool Correspondence::clippedTriangles() const
+{
+	const int clipped = std::popcount(clipped_bits_);
+	return clipped >= 3 && 2 * clipped < n_cand_;
+}
+
 /* Was the candidate set `set` (four bits) formed by searchQuads() over `table`? */
 bool Correspondence::formedIn(const NeighbourTable &table, std::uint64_t set)
 {
@@ -1321,13 +1345,27 @@ bool Correspondence::formedIn(const NeighbourTable &table, std::uint64_t set)
 	return false;
 }
 
-/* The first triangle_neighbours of candidate a's neighbours, as bits. */
-std::uint64_t Correspondence::triangleNeighbours(int a) const
+/* The first triangle_neighbours of candidate a's neighbours in `table`, as bits. */
+std::uint64_t Correspondence::triangleNeighbours(const NeighbourTable &table, int a) const
 {
 	std::uint64_t bits = 0;
-	for (int i = 0; i < std::min(neighbours_.n[a], config_.triangle_neighbours); ++i)
-		bits |= std::uint64_t{ 1 } << neighbours_.list[a][i];
+	for (int i = 0; i < std::min(table.n[a], config_.triangle_neighbours); ++i)
+		bits |= std::uint64_t{ 1 } << table.list[a][i];
 	return bits;
+}
+
+/* Was the candidate set `set` (three bits) formed by searchTriangles() over `table`? */
+bool Correspondence::triangleFormedIn(const NeighbourTable &table, std::uint64_t set) const
+{
+	if ((set & table.among) != set)
+		return false;
+	for (std::uint64_t members = set; members != 0; members &= members - 1) {
+		const int x = std::countr_zero(members);
+		const std::uint64_t others = set & ~(std::uint64_t{ 1 } << x);
+		if ((triangleNeighbours(table, x) & others) == others)
+			return true;
+	}
+	return false;
 }
 
 /*
@@ -1373,6 +1411,9 @@ bool Correspondence::screenQuad(const QuadInvariant &inv, std::size_t f, const i
  */
 bool Correspondence::searchQuads(const NeighbourTable &table, const NeighbourTable *before)
 {
+	/* The triangles' share stays theirs (searchTriangles()). */
+	const int quad_budget = config_.max_hypotheses - std::min(config_.max_triangle_hypotheses,
+								  config_.max_hypotheses / 2);
 	for (int a = 0; a < n_cand_; ++a) {
 		const int na = table.n[a];
 		const auto &nb = table.list[a];
@@ -1393,7 +1434,7 @@ bool Correspondence::searchQuads(const NeighbourTable &table, const NeighbourTab
 					}
 					if (earlier || (before && formedIn(*before, set)))
 						continue;
-					if (hypotheses_ >= config_.max_hypotheses ||
+					if (hypotheses_ >= quad_budget ||
 					    verified_ >= config_.max_verifications) {
 						budget_hit_ = true;
 						return false;
@@ -1509,14 +1550,14 @@ bool Correspondence::tryTriangle(const TriangleModel &triangle, const Eigen::Vec
  * Each assignment of the three points to three vertices of the face gives up
  * to four poses (P3P); each is verified like a quadrilateral's.
  */
-bool Correspondence::searchTriangles()
+bool Correspondence::searchTriangles(const NeighbourTable &table, const NeighbourTable *before)
 {
 	triangle_leds_ = triangleLeds();
 	const int budget =
 		std::min(config_.max_hypotheses, hypotheses_ + config_.max_triangle_hypotheses);
 	for (int a0 = 0; a0 < n_cand_; ++a0) {
-		const int na = std::min(neighbours_.n[a0], config_.triangle_neighbours);
-		const auto &nb = neighbours_.list[a0];
+		const int na = std::min(table.n[a0], config_.triangle_neighbours);
+		const auto &nb = table.list[a0];
 		for (int i = 0; i < na; ++i)
 			for (int j = i + 1; j < na; ++j) {
 				const int m[2] = { nb[i], nb[j] };
@@ -1527,10 +1568,10 @@ bool Correspondence::searchTriangles()
 				for (int e = 0; e < 2 && !earlier; ++e) {
 					const std::uint64_t others = set &
 								     ~(std::uint64_t{ 1 } << m[e]);
-					earlier = m[e] < a0 &&
-						  (triangleNeighbours(m[e]) & others) == others;
+					earlier = m[e] < a0 && (triangleNeighbours(table, m[e]) &
+								others) == others;
 				}
-				if (earlier)
+				if (earlier || (before && triangleFormedIn(*before, set)))
 					continue;
 				if (hypotheses_ >= budget ||
 				    verified_ >= config_.max_verifications) {
@@ -1620,7 +1661,8 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 						: (std::uint64_t{ 1 } << n_cand_) - 1;
 	findNeighbours(all, &neighbours_);
 	const bool clipped_pass = clippedPass();
-	if (clipped_pass)
+	const bool clipped_triangles = clippedTriangles();
+	if (clipped_triangles)
 		findNeighbours(clipped_bits_, &clipped_neighbours_);
 
 	/*
@@ -1634,8 +1676,18 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 		   searchQuads(neighbours_, clipped_pass ? &clipped_neighbours_ : nullptr);
 	for (const auto &h : kept_)
 		complete = complete || (acceptable(h) && h.missing == 0);
+	/*
+	 * The triangles, the clipped spots' first: three clipped LEDs of a face
+	 * whose fourth is too dim to clip (seen obliquely, or off its emission
+	 * axis) put it, and every further LED, on its spot through P3P, where
+	 * among thirty reflections at close range the face's four spots are
+	 * rarely each other's nearest neighbours and the quadrilaterals run out
+	 * of budget before they meet them.
+	 */
+	if (!complete && clipped_triangles)
+		complete = searchTriangles(clipped_neighbours_, nullptr);
 	if (!complete)
-		searchTriangles();
+		searchTriangles(neighbours_, clipped_triangles ? &clipped_neighbours_ : nullptr);
 
 	result->budget_exhausted = budget_hit_;
 	if (kept_.empty())

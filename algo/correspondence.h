@@ -115,7 +115,9 @@ struct CorrespondenceConfig {
 	double screen_sigma_px = 1.0;
 	/*
 	 * Screen at most this many (subset, face, assignment seeing the face from
-	 * its front) hypotheses per frame, of them this many from triangles.
+	 * its front) hypotheses per frame, of them this many from triangles: the
+	 * quadrilaterals stop that many short (at most half the budget), so the
+	 * triangles keep their share when the quadrilaterals run out.
 	 */
 	int max_hypotheses = 20000;
 	int max_triangle_hypotheses = 4000;
@@ -329,11 +331,13 @@ private:
 		std::array<int, kMaxCandidates> n{};
 	};
 	void findNeighbours(std::uint64_t among, NeighbourTable *table) const;
-	std::uint64_t triangleNeighbours(int a) const;
+	std::uint64_t triangleNeighbours(const NeighbourTable &table, int a) const;
 	bool clippedPass() const;
+	bool clippedTriangles() const;
 	static bool formedIn(const NeighbourTable &table, std::uint64_t set);
+	bool triangleFormedIn(const NeighbourTable &table, std::uint64_t set) const;
 	bool searchQuads(const NeighbourTable &table, const NeighbourTable *before);
-	bool searchTriangles();
+	bool searchTriangles(const NeighbourTable &table, const NeighbourTable *before);
 	bool fullSearch(const Pose *reference, CorrespondenceResult *result);
 
 	TargetModel target_;

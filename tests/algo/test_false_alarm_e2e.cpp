@@ -233,6 +233,16 @@ const SolvedFrame kSolvedFrames[] = {
 	 * forms were counted too, and the frame gave no pose.
 	 */
 	{ "TheBoundCountsOnlyTheHypothesesTheSearchForms", "pyramid.json", 833 },
+	/*
+	 * The pyramid at 318 mm, six LEDs among 32 reflections (35 candidates):
+	 * three LEDs of one face clip, its fourth and the top face's other two
+	 * do not (peaks 70-135 against reflections of 150-255), and no LED has
+	 * three of a face's others among its nine nearest candidates, so no
+	 * quadrilateral is the target's and the budget ran out (error_too_large).
+	 * The clipped spots' triangle puts the other three LEDs on their spots
+	 * (log10 NFA -10.8).
+	 */
+	{ "ClippedTrianglesReachAFaceTheNeighboursMiss", "pyramid.json", 13 },
 };
 
 class SolvedFrames : public ::testing::TestWithParam<SolvedFrame>
