@@ -231,8 +231,9 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 	}
 
 	CorrespondenceResult match;
-	const Pose predicted = predictedPose();
-	const Pose *prediction = (config_.tracking && have_track_) ? &predicted : nullptr;
+	const bool tracking = config_.tracking && have_track_;
+	const Pose predicted = tracking ? predictedPose() : Pose{};
+	const Pose *prediction = tracking ? &predicted : nullptr;
 	correspondence_.solve(blobs_, prediction, &match);
 	result_.hypotheses = match.hypotheses;
 	result_.verified = match.verified;

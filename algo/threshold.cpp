@@ -493,22 +493,26 @@ bool Thresholder::backgroundSlope(double u_px, double v_px, double *gx, double *
 	}
 	fit = SlopeFit{};
 	fit.generation = generation_;
+	/* The centre of tile k along an extent (the last tile may be cut short), pixels. */
+	auto centre = [tile](int k, int extent) {
+		return k * tile + 0.5 * (std::min(tile, extent - k * tile) - 1);
+	};
 	/* The slope and its variance do not depend on the pixel: the plane about the tile's centre. */
-	u_px = c_at * tile + 0.5 * (std::min(tile, width_ - c_at * tile) - 1);
-	v_px = r_at * tile + 0.5 * (std::min(tile, height_ - r_at * tile) - 1);
+	const double u0_px = centre(c_at, width_);
+	const double v0_px = centre(r_at, height_);
 	const int c0 = std::max(c_at - 2, 0), c1 = std::min(c_at + 2, cols_ - 1);
 	const int r0 = std::max(r_at - 2, 0), r1 = std::min(r_at + 2, rows_ - 1);
-	/* Least squares b = a + gx (x - u) + gy (y - v) over the tiles' centres. */
+	/* Least squares b = a + gx (x - u0) + gy (y - v0) over the tiles' centres. */
 	double s[3][3] = {}, t[3] = {};
 	double b2sum = 0.0;
 	int n = 0;
 	for (int r = r0; r <= r1; ++r) {
-		const double y = r * tile + 0.5 * (std::min(tile, height_ - r * tile) - 1);
+		const double y = centre(r, height_);
 		for (int c = c0; c <= c1; ++c) {
-			const double x = c * tile + 0.5 * (std::min(tile, width_ - c * tile) - 1);
+			const double x = centre(c, width_);
 			const double b = padded_[static_cast<std::size_t>(r + 1) * pcols +
 						 static_cast<std::size_t>(c + 1)];
-			const double f[3] = { 1.0, x - u_px, y - v_px };
+			const double f[3] = { 1.0, x - u0_px, y - v0_px };
 			for (int i = 0; i < 3; ++i) {
 				for (int j = 0; j < 3; ++j)
 					s[i][j] += f[i] * f[j];
