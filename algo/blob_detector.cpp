@@ -765,6 +765,27 @@ bool BlobDetector::detect(const ImageView &image, StaticVector<Blob, kMaxCandida
 	}
 	st->components = static_cast<int>(impl_->components);
 	collect(image, st, blobs);
+	/*
+	 * On a steep background the cells' finer levels (Thresholder::cellMap())
+	 * find spots below their tile's level: a second labelling at those
+	 * levels, of which only the components none of whose pixels reached the
+	 * tiles' levels are new (the others were found, or dropped, above; a
+	 * flank that the cells' levels segment as one large component no longer
+	 * swallows the spots on it).
+	 */
+	if (thresholder_.hasSteepTiles()) {
+		const PixelWindow &w = thresholder_.steepBox();
+		if (!impl_->label(image, thresholder_.cellMap(), filter_.fill_gap_px,
+				  filter_.clip_level, w)) {
+			st->component_overflow = impl_->overflow;
+			return false;
+		}
+		const std::size_t before =
+			blobs->size() + static_cast<std::size_t>(st->dropped_capacity);
+		collect(image, st, blobs, &map, &w);
+		st->below_tile_level =
+			static_cast<int>(blobs->size() + st->dropped_capacity - before);
+	}
 	std::sort_heap(blobs->begin(), blobs->end(), stronger);
 	reference_ = st->threshold.valid;
 	reference_threshold_ = st->threshold;
@@ -854,10 +875,66 @@ void BlobDetector::correctBackgroundSlope(const BlobMoments &m, Blob *b) const
 	b->cov_uv_px2 += k * (mxx * mxy + mxy * myy);
 }
 
+/*
+ * Does a component stand out of its own surroundings: its peak at least
+ * `contrast` above the median of a ring 2 px outside its box (up to 64
+ * samples spread round it)? A spot does; where a bright background bulges
+ * above the interpolation of the tile backgrounds, its noise does not.
+ * Allocates: never.
+ */
+bool BlobDetector::standsOut(const ImageView &image, const BlobMoments &m, int contrast)
+{
+	constexpr int kGap = 2;
+	constexpr int kSamples = 64;
+	const int x0 = std::max(m.x_min - kGap, 0), x1 = std::min(m.x_max + kGap, image.width - 1);
+	const int y0 = std::max(m.y_min - kGap, 0), y1 = std::min(m.y_max + kGap, image.height - 1);
+	const int w = x1 - x0, h = y1 - y0;
+	const int perimeter = 2 * (w + h);
+	if (w < 1 || h < 1)
+		return false;
+	const int step = (perimeter + kSamples - 1) / kSamples;
+	std::array<std::uint8_t, kSamples> ring{};
+	std::size_t n = 0;
+	for (int k = 0; k < perimeter && n < ring.size(); k += step) {
+		int x = 0, y = 0;
+		if (k < w) {
+			x = x0 + k;
+			y = y0;
+		} else if (k < w + h) {
+			x = x1;
+			y = y0 + (k - w);
+		} else if (k < 2 * w + h) {
+			x = x1 - (k - w - h);
+			y = y1;
+		} else {
+			x = x0;
+			y = y1 - (k - 2 * w - h);
+		}
+		ring[n++] = image.at(x, y);
+	}
+	const auto mid = ring.begin() + static_cast<std::ptrdiff_t>(n / 2);
+	std::nth_element(ring.begin(), mid, ring.begin() + static_cast<std::ptrdiff_t>(n));
+	return static_cast<int>(m.peak) >= static_cast<int>(*mid) + contrast;
+}
+
 /* Filter and measure the components of the last labelling into the heap `blobs`. */
 void BlobDetector::collect(const ImageView &image, BlobStats *st,
-			   StaticVector<Blob, kMaxCandidates> *blobs) const
+			   StaticVector<Blob, kMaxCandidates> *blobs, const ThresholdMap *below,
+			   const PixelWindow *window) const
 {
+	/* The lowest level of `below` over the tiles a component's box touches. */
+	auto lowest = [below](const BlobMoments &m) {
+		const int tile = below->tilePx();
+		const int c0 = std::min<int>(m.x_min / tile, below->cols() - 1),
+			  c1 = std::min<int>(m.x_max / tile, below->cols() - 1);
+		const int r0 = std::min<int>(m.y_min / tile, below->rows() - 1),
+			  r1 = std::min<int>(m.y_max / tile, below->rows() - 1);
+		int level = 255;
+		for (int r = r0; r <= r1; ++r)
+			for (int c = c0; c <= c1; ++c)
+				level = std::min<int>(level, below->level(c, r));
+		return level;
+	};
 	const std::int64_t frame_px = static_cast<std::int64_t>(image.width) * image.height;
 	const std::int64_t max_area = filter_.max_area_px > 0
 					      ? filter_.max_area_px
@@ -870,6 +947,15 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 	const std::size_t n = impl_->components;
 	for (std::size_t i = 0; i < n; ++i) {
 		const BlobMoments &m = comps[i];
+		/* (A component on a side of the window inside the frame may go on beyond it.) */
+		if (below &&
+		    (below->cols() == 0 || m.peak >= lowest(m) ||
+		     (window && ((window->x0 > 0 && m.x_min == window->x0) ||
+				 (window->x1 < image.width && m.x_max + 1 == window->x1) ||
+				 (window->y0 > 0 && m.y_min == window->y0) ||
+				 (window->y1 < image.height && m.y_max + 1 == window->y1))) ||
+		     !standsOut(image, m, thresholder_.contrast())))
+			continue;
 		if (static_cast<std::int64_t>(m.area) < min_area) {
 			++st->dropped_small;
 			continue;

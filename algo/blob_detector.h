@@ -111,11 +111,6 @@ struct BlobFilterConfig {
 	int clip_level = 255;
 };
 
-/* A rectangle of a frame: columns [x0, x1), rows [y0, y1), pixels. */
-struct PixelWindow {
-	int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-};
-
 struct BlobStats {
 	int components = 0; /* connected components found */
 	int dropped_small = 0; /* specks, single pixels */
@@ -124,6 +119,8 @@ struct BlobStats {
 	int dropped_capacity = 0; /* valid blobs beyond kMaxCandidates (weakest dropped) */
 	bool component_overflow = false; /* more than kMaxComponents: frame too cluttered */
 	bool window_cut = false; /* detectWindows(): a component reaches beyond a window */
+	/* detect(): spots found on the threshold's cells below their tile's level (Thresholder::cellMap()) */
+	int below_tile_level = 0;
 	ThresholdStats threshold;
 };
 
@@ -187,9 +184,18 @@ private:
 	bool labelImpl(const ImageView &image, const ThresholdMap &map);
 	std::size_t componentCount() const;
 	const BlobMoments *components() const;
+	/*
+	 * The last labelling's components that pass the filter, into the heap
+	 * `blobs`. With `below`: only those whose peak lies below every level of
+	 * `below` around them (none of their pixels reaches that map), that stand
+	 * out of their surroundings (standsOut()) and, labelled in `window`, do
+	 * not reach its sides inside the frame.
+	 */
 	void collect(const ImageView &image, BlobStats *stats,
-		     StaticVector<Blob, kMaxCandidates> *blobs) const;
+		     StaticVector<Blob, kMaxCandidates> *blobs, const ThresholdMap *below = nullptr,
+		     const PixelWindow *window = nullptr) const;
 	void correctBackgroundSlope(const BlobMoments &m, Blob *b) const;
+	static bool standsOut(const ImageView &image, const BlobMoments &m, int contrast);
 
 	Thresholder thresholder_;
 	BlobFilterConfig filter_;

@@ -60,4 +60,9 @@ private:
 	std::vector<std::uint8_t> pixels_;
 };
 
+/* A rectangle of a frame: columns [x0, x1), rows [y0, y1), pixels. */
+struct PixelWindow {
+	int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+
 } /* namespace dockpose */

@@ -111,6 +111,7 @@ Thresholder::Thresholder(int max_width, int max_height, const ThresholdConfig &c
 	const int cols = tilesFor(max_width_, tile_px_);
 	const int rows = tilesFor(max_height_, tile_px_);
 	map_ = ThresholdMap(max_width_, max_height_, tile_px_);
+	cell_map_ = ThresholdMap(max_width_, max_height_, std::max(tile_px_ / 4, 4));
 	col_start_.assign(static_cast<std::size_t>(cols), 0);
 	col_count_.assign(static_cast<std::size_t>(cols), 0);
 	row_start_.assign(static_cast<std::size_t>(rows), 0);
@@ -130,6 +131,8 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 	*st = ThresholdStats{};
 
 	cols_ = rows_ = 0;
+	steep_tiles_ = false;
+	cell_map_.setUniform(255);
 	/* Every kept slope fit is of an earlier map (0: none; at the wrap, after 2^32 maps, all cleared). */
 	if (++generation_ == 0) {
 		for (SlopeFit &fit : slopes_)
@@ -466,6 +469,9 @@ void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
 		}
 	}
 
+	contrast_ = static_cast<int>(std::min<std::int64_t>(contrast.toIntRound(), 255));
+	computeCells(width, height, cols, rows, contrast);
+
 	stats->level_min = level_min;
 	stats->level_max = level_max;
 	stats->background = static_cast<double>(background_sum) / static_cast<double>(cols * rows);
@@ -473,6 +479,130 @@ void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
 	stats->tiles_x = cols;
 	stats->tiles_y = rows;
 	stats->valid = true;
+}
+
+void Thresholder::computeCells(int width, int height, int cols, int rows, UQ16_16 contrast)
+{
+	const int tile = tile_px_;
+	const int cell = std::max(tile / 4, 4);
+	steep_box_ = PixelWindow{};
+	if (!cell_map_.reshape(width, height, cell))
+		return;
+	const int pcols = cols + 2;
+	auto P = [&](int c, int r) -> std::int64_t {
+		return padded_[static_cast<std::size_t>(r + 1) * pcols +
+			       static_cast<std::size_t>(c + 1)];
+	};
+	const int ccols = corners_.empty() ? 0 : cols + 1;
+	auto corner = [&](int i, int j) -> std::int64_t {
+		return corners_[static_cast<std::size_t>(j) * ccols + static_cast<std::size_t>(i)];
+	};
+	/*
+	 * A tile is steep when the interpolation over it (its centre and
+	 * corners, quarter levels) spans the contrast or more: only there can a
+	 * cell lie that far below the tile's level, and a spot that the tile's
+	 * level misses by less stands out of its background by less than twice
+	 * the contrast. The others' cells take the tile's level.
+	 */
+	const std::int64_t steep4 = 4 * contrast.toIntRound();
+	const int per_tile = tile / cell;
+	int c_lo = cols, c_hi = -1, r_lo = rows, r_hi = -1;
+	for (int r = 0; r < rows; ++r)
+		for (int c = 0; c < cols; ++c) {
+			const std::int64_t v[5] = { 4 * P(c, r), corner(c, r), corner(c + 1, r),
+						    corner(c, r + 1), corner(c + 1, r + 1) };
+			const auto [lo, hi] = std::minmax_element(v, v + 5);
+			const bool steep = *hi - *lo >= steep4;
+			if (steep) {
+				c_lo = std::min(c_lo, c);
+				c_hi = std::max(c_hi, c);
+				r_lo = std::min(r_lo, r);
+				r_hi = std::max(r_hi, r);
+			}
+			const std::uint8_t level = map_.level(c, r);
+			for (int j = r * per_tile;
+			     j < std::min((r + 1) * per_tile, cell_map_.rows()); ++j)
+				for (int i = c * per_tile;
+				     i < std::min((c + 1) * per_tile, cell_map_.cols()); ++i)
+					cell_map_.setLevel(i, j, steep ? 0 : level);
+		}
+	steep_tiles_ = c_hi >= 0;
+	if (!steep_tiles_)
+		return;
+
+	/*
+	 * The interpolation at pixel (x, y) times (2 tile)^2: tile c's centre is
+	 * at x = c tile + (tile - 1) / 2, in doubled coordinates 2 c tile + tile - 1.
+	 */
+	const std::int64_t span = 2 * static_cast<std::int64_t>(tile);
+	auto interpolated = [&](int x, int y) -> std::int64_t {
+		auto axis = [&](int v, int n, int *k, std::int64_t *w) {
+			const std::int64_t d = 2 * static_cast<std::int64_t>(v) - (tile - 1);
+			*k = static_cast<int>(std::clamp<std::int64_t>(
+				d >= 0 ? d / span : -1, -1, static_cast<std::int64_t>(n) - 1));
+			*w = std::clamp<std::int64_t>(d - *k * span, 0, span);
+		};
+		int c = 0, r = 0;
+		std::int64_t wx = 0, wy = 0;
+		axis(x, cols, &c, &wx);
+		axis(y, rows, &r, &wy);
+		const int c1 = std::min(c + 1, cols), r1 = std::min(r + 1, rows);
+		return P(c, r) * (span - wx) * (span - wy) + P(c1, r) * wx * (span - wy) +
+		       P(c, r1) * (span - wx) * wy + P(c1, r1) * wx * wy;
+	};
+	const std::int64_t scale = span * span;
+	for (int r = r_lo; r <= r_hi; ++r)
+		for (int c = c_lo; c <= c_hi; ++c) {
+			const int tile_level = map_.level(c, r);
+			/*
+			 * Never below the lowest background of the tiles around plus the
+			 * contrast: at the frame's edge the interpolation extrapolates, and
+			 * beside a bright patch it can fall below any background there.
+			 */
+			std::int64_t floor_bg = P(c, r);
+			for (int rr = std::max(r - 1, 0); rr <= std::min(r + 1, rows - 1); ++rr)
+				for (int cc = std::max(c - 1, 0); cc <= std::min(c + 1, cols - 1);
+				     ++cc)
+					floor_bg = std::min(floor_bg, P(cc, rr));
+			const int floor_level = static_cast<int>(std::min<std::int64_t>(
+				(UQ16_16(static_cast<int>(std::max<std::int64_t>(floor_bg, 0))) +
+				 contrast)
+					.toIntRound(),
+				tile_level));
+			/* Where the backgrounds bend down the interpolation falls short by up to 1/8 of the bend. */
+			const std::int64_t bend_x =
+				std::max<std::int64_t>(0, 2 * P(c, r) - P(c - 1, r) - P(c + 1, r));
+			const std::int64_t bend_y =
+				std::max<std::int64_t>(0, 2 * P(c, r) - P(c, r - 1) - P(c, r + 1));
+			for (int j = r * per_tile;
+			     j < std::min((r + 1) * per_tile, cell_map_.rows()); ++j) {
+				const int y0 = j * cell, y1 = std::min(y0 + cell, height) - 1;
+				for (int i = c * per_tile;
+				     i < std::min((c + 1) * per_tile, cell_map_.cols()); ++i) {
+					if (cell_map_.level(i, j) != 0)
+						continue; /* not a steep tile's */
+					const int x0 = i * cell,
+						  x1 = std::min(x0 + cell, width) - 1;
+					std::int64_t hi = std::max(
+						{ interpolated(x0, y0), interpolated(x1, y0),
+						  interpolated(x0, y1), interpolated(x1, y1) });
+					hi += (bend_x + bend_y) * scale / 8;
+					/* In Q16.16, plus the contrast, rounded; never above the tile's. */
+					const std::int64_t raw =
+						(std::max<std::int64_t>(hi, 0) << 16) / scale;
+					const UQ16_16 bg = UQ16_16::fromWideRaw(
+						static_cast<std::uint64_t>(raw));
+					const int level = static_cast<int>(std::clamp<std::int64_t>(
+						(bg + contrast).toIntRound(), floor_level,
+						tile_level));
+					cell_map_.setLevel(i, j, static_cast<std::uint8_t>(level));
+				}
+			}
+		}
+	/* What a second labelling must read: the steep tiles and one tile round them. */
+	steep_box_ = PixelWindow{ std::max(c_lo - 1, 0) * tile, std::max(r_lo - 1, 0) * tile,
+				  std::min((c_hi + 2) * tile, width),
+				  std::min((r_hi + 2) * tile, height) };
 }
 
 bool Thresholder::backgroundSlope(double u_px, double v_px, double *gx, double *gy,

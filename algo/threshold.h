@@ -171,6 +171,27 @@ public:
 	const ThresholdMap &map() const { return map_; }
 
 	/*
+	 * The last Auto compute()'s levels on cells a quarter of a tile across
+	 * (at least 4 px): each the largest value that the bilinear interpolation
+	 * of the tile backgrounds takes in the cell (plus an eighth of the
+	 * backgrounds' second difference where they bend down, the most the
+	 * interpolation can fall short of a smooth background there) plus the
+	 * contrast, never above its tile's level. On a steep background (the
+	 * flank of a sunlit patch) the tile's level is its brightest corner's,
+	 * and a faint LED at the foot of the flank lies below it; the cell's
+	 * level follows the flank. Only steep tiles (the interpolation spans the
+	 * contrast or more over them) get cells of their own; the others' cells
+	 * keep the tile's level. hasSteepTiles(): there is one.
+	 * Allocates: never.
+	 */
+	const ThresholdMap &cellMap() const { return cell_map_; }
+	bool hasSteepTiles() const { return steep_tiles_; }
+	/* The last Auto compute()'s contrast, levels: a level is a background plus this. */
+	int contrast() const { return contrast_; }
+	/* The steep tiles and one tile round them (empty: none). */
+	const PixelWindow &steepBox() const { return steep_box_; }
+
+	/*
 	 * The background's slope around pixel (u_px, v_px) in the last Auto
 	 * compute(): a plane fitted to the guarded tile backgrounds of the 5 x 5
 	 * tiles around it, its gradient (gx, gy) in levels per pixel, and the
@@ -206,6 +227,12 @@ private:
 	UQ16_16 min_contrast_;
 
 	ThresholdMap map_;
+	ThresholdMap cell_map_;
+	bool steep_tiles_ = false;
+	int contrast_ = 0;
+	PixelWindow steep_box_;
+	/* Levels on the cells of cell_map_ (computeAuto()'s last step). */
+	void computeCells(int width, int height, int cols, int rows, UQ16_16 contrast);
 	/* Sample positions of the current frame's tile columns / rows. */
 	std::vector<int> col_start_, col_count_, row_start_, row_count_;
 	/* One histogram and the minimum sample per tile column of the current tile row. */

@@ -874,3 +874,61 @@ TEST(BlobWindows, RefuseACutSpotAFrameWithoutReferenceAndBadWindows)
 	const PixelWindow corner{ 0, 0, 40, 40 };
 	EXPECT_TRUE(det.detectWindows(f.view(), &corner, 1, &blobs, &stats));
 }
+
+/*
+ * A faint spot at the foot of a sunlit patch's flank: its 64 px tile reaches
+ * up onto the patch, the tile's level (its brightest corner's interpolation
+ * plus the contrast) lies far above the spot's peak, and only the
+ * threshold's finer cells (Thresholder::cellMap()) see it.
+ */
+TEST(BlobSteepBackground, AFaintSpotAtTheFootOfABrightPatchIsFound)
+{
+	constexpr int kSize = 512;
+	/* The patch: a disc of radius 150 px at 150 levels, its edge falling over 30 px (smoothstep). */
+	const double patch_u = 200.0, patch_v = 150.0;
+	const double spot_u = 300.3, spot_v = 311.6; /* 190 px from the patch's centre */
+	std::mt19937 rng(7);
+	std::normal_distribution<double> noise(0.0, 2.0);
+	auto paint = [&](StridedFrame *f, double spot_peak) {
+		for (int y = 0; y < kSize; ++y)
+			for (int x = 0; x < kSize; ++x) {
+				const double r = std::hypot(x - patch_u, y - patch_v);
+				const double e = std::clamp((180.0 - r) / 30.0, 0.0, 1.0);
+				const double ds2 =
+					(x - spot_u) * (x - spot_u) + (y - spot_v) * (y - spot_v);
+				const double v = 10.0 + 150.0 * e * e * (3.0 - 2.0 * e) +
+						 spot_peak * std::exp(-ds2 / (2.0 * 1.2 * 1.2)) +
+						 noise(rng);
+				f->at(x, y) = static_cast<std::uint8_t>(
+					std::clamp(std::lround(v), 0L, 255L));
+			}
+	};
+	auto near_spot = [&](const StaticVector<Blob, kMaxCandidates> &blobs) {
+		const Blob *found = nullptr;
+		for (const Blob &b : blobs)
+			if (std::hypot(b.u_px - spot_u, b.v_px - spot_v) < 5.0)
+				found = &b;
+		return found;
+	};
+	StridedFrame f(kSize, kSize, kSize);
+	paint(&f, 45.0);
+	BlobDetector det(kSize, kSize, ThresholdConfig{}, BlobFilterConfig{});
+	StaticVector<Blob, kMaxCandidates> blobs;
+	BlobStats stats;
+	ASSERT_TRUE(det.detect(f.view(), &blobs, &stats));
+	/* The spot's brightest pixel lies far below its tile's level (the case this is about). */
+	const ThresholdMap &tiles = det.thresholder().map();
+	EXPECT_LT(f.at(300, 312) + 40, tiles.levelAt(300, 312));
+	EXPECT_TRUE(det.thresholder().hasSteepTiles());
+	const Blob *spot = near_spot(blobs);
+	ASSERT_NE(spot, nullptr);
+	EXPECT_GE(stats.below_tile_level, 1);
+	EXPECT_NEAR(spot->u_px, spot_u, 0.15);
+	EXPECT_NEAR(spot->v_px, spot_v, 0.15);
+
+	/* Without the spot: nothing there. */
+	StridedFrame g(kSize, kSize, kSize);
+	paint(&g, 0.0);
+	ASSERT_TRUE(det.detect(g.view(), &blobs, &stats));
+	EXPECT_EQ(near_spot(blobs), nullptr);
+}

@@ -464,3 +464,46 @@ TEST(Threshold, BackgroundSlopeOfAPlane)
 	a.compute(ImageView{});
 	EXPECT_FALSE(a.backgroundSlope(100.0, 100.0, &sx, &sy, &sigma));
 }
+
+/*
+ * The cells (Thresholder::cellMap()): on the 0 -> 80 gradient no tile is
+ * steep and every cell keeps its tile's level; on the flank of a bright
+ * disc (150 levels, its edge falling over 30 px) the cells below the flank
+ * keep the contrast above the background there, far below their tile's
+ * level, and no cell is ever above its tile.
+ */
+TEST(Threshold, CellsFollowASteepFlank)
+{
+	Thresholder th(kW, kH, ThresholdConfig{});
+	auto grad = [](int x, int y) {
+		return 80.0 * x / (kW - 1) + 30.0 * y / (kH - 1);
+	};
+	const Frame plane = render(kW, kH, grad, 2.0, {}, 7);
+	const ThresholdMap &tiles = th.compute(plane.view());
+	EXPECT_FALSE(th.hasSteepTiles());
+	const ThresholdMap &cells = th.cellMap();
+	for (int y = 0; y < kH; y += 8)
+		for (int x = 0; x < kW; x += 8)
+			ASSERT_EQ(cells.levelAt(x, y), tiles.levelAt(x, y)) << x << "," << y;
+
+	auto disc = [](int x, int y) {
+		const double r = std::hypot(x - 200.0, y - 150.0);
+		const double e = std::clamp((180.0 - r) / 30.0, 0.0, 1.0);
+		return 10.0 + 150.0 * e * e * (3.0 - 2.0 * e);
+	};
+	const Frame patch = render(kW, kH, disc, 2.0, {}, 8);
+	const ThresholdMap &tiles2 = th.compute(patch.view());
+	EXPECT_TRUE(th.hasSteepTiles());
+	int below_flank = 0;
+	for (int y = 0; y < kH; y += 4)
+		for (int x = 0; x < kW; x += 4) {
+			const int cell = th.cellMap().levelAt(x, y), tile = tiles2.levelAt(x, y);
+			ASSERT_LE(cell, tile) << x << "," << y;
+			/* Beyond the disc (the background at 10): the cell keeps its contrast. */
+			if (std::hypot(x - 200.0, y - 150.0) > 181.0) {
+				ASSERT_GE(cell, 10 + 12 - 3) << x << "," << y;
+				below_flank += tile - cell >= 40;
+			}
+		}
+	EXPECT_GT(below_flank, 50);
+}
