@@ -16,6 +16,16 @@ namespace {
 /* 1.4826 / sqrt(2): from the MAD of a difference of two pixels to one pixel's sigma. */
 constexpr UQ16_16 kMadToSigma{ 1.4826 * 0.70710678118654752440 };
 
+/*
+ * The threshold's cells: a quarter of a tile where that divides it, else a
+ * half, else the tile itself (each tile holds whole cells, and the cells
+ * cover the frame as the tiles do).
+ */
+int cellPx(int tile)
+{
+	return tile % 4 == 0 ? tile / 4 : tile % 2 == 0 ? tile / 2 : tile;
+}
+
 int clampInt(int v, int lo, int hi)
 {
 	return v < lo ? lo : (v > hi ? hi : v);
@@ -111,7 +121,7 @@ Thresholder::Thresholder(int max_width, int max_height, const ThresholdConfig &c
 	const int cols = tilesFor(max_width_, tile_px_);
 	const int rows = tilesFor(max_height_, tile_px_);
 	map_ = ThresholdMap(max_width_, max_height_, tile_px_);
-	cell_map_ = ThresholdMap(max_width_, max_height_, std::max(tile_px_ / 4, 4));
+	cell_map_ = ThresholdMap(max_width_, max_height_, cellPx(tile_px_));
 	col_start_.assign(static_cast<std::size_t>(cols), 0);
 	col_count_.assign(static_cast<std::size_t>(cols), 0);
 	row_start_.assign(static_cast<std::size_t>(rows), 0);
@@ -484,7 +494,7 @@ void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
 void Thresholder::computeCells(int width, int height, int cols, int rows, UQ16_16 contrast)
 {
 	const int tile = tile_px_;
-	const int cell = std::max(tile / 4, 4);
+	const int cell = cellPx(tile);
 	steep_box_ = PixelWindow{};
 	if (!cell_map_.reshape(width, height, cell))
 		return;

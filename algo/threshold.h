@@ -172,7 +172,7 @@ public:
 
 	/*
 	 * The last Auto compute()'s levels on cells a quarter of a tile across
-	 * (at least 4 px): each the largest value that the bilinear interpolation
+	 * (a half, or the tile, when a quarter does not divide it): each the largest value that the bilinear interpolation
 	 * of the tile backgrounds takes in the cell (plus an eighth of the
 	 * backgrounds' second difference where they bend down, the most the
 	 * interpolation can fall short of a smooth background there) plus the

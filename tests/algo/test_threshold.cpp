@@ -506,4 +506,23 @@ TEST(Threshold, CellsFollowASteepFlank)
 			}
 		}
 	EXPECT_GT(below_flank, 50);
+
+	/* Tiles a quarter does not divide: whole cells in every tile, none above its tile. */
+	for (const int tile_px : { 50, 33 }) {
+		ThresholdConfig config;
+		config.tile_px = tile_px;
+		Thresholder odd(kW, kH, config);
+		const ThresholdMap &odd_tiles = odd.compute(patch.view());
+		EXPECT_EQ(odd.cellMap().tilePx(), tile_px % 2 == 0 ? tile_px / 2 : tile_px);
+		for (int y = 0; y < kH; y += 3)
+			for (int x = 0; x < kW; x += 3) {
+				const int cell = odd.cellMap().levelAt(x, y);
+				ASSERT_LE(cell, odd_tiles.levelAt(x, y))
+					<< tile_px << ": " << x << "," << y;
+				if (std::hypot(x - 200.0, y - 150.0) > 181.0) {
+					ASSERT_GE(cell, 10 + 12 - 3)
+						<< tile_px << ": " << x << "," << y;
+				}
+			}
+	}
 }
