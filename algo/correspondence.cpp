@@ -1662,7 +1662,7 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	findNeighbours(all, &neighbours_);
 	const bool clipped_pass = clippedPass();
 	const bool clipped_triangles = clippedTriangles();
-	if (clipped_triangles)
+	if (clipped_pass || clipped_triangles)
 		findNeighbours(clipped_bits_, &clipped_neighbours_);
 
 	/*
