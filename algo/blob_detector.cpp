@@ -775,16 +775,20 @@ bool BlobDetector::detect(const ImageView &image, StaticVector<Blob, kMaxCandida
 	 */
 	if (thresholder_.hasSteepTiles()) {
 		const PixelWindow &w = thresholder_.steepBox();
-		if (!impl_->label(image, thresholder_.cellMap(), filter_.fill_gap_px,
-				  filter_.clip_level, w)) {
-			st->component_overflow = impl_->overflow;
-			return false;
+		/*
+		 * More components than the labelling holds, there only: the
+		 * frame keeps the first look's blobs, without the second's.
+		 */
+		if (impl_->label(image, thresholder_.cellMap(), filter_.fill_gap_px,
+				 filter_.clip_level, w)) {
+			const std::size_t before =
+				blobs->size() + static_cast<std::size_t>(st->dropped_capacity);
+			collect(image, st, blobs, &map, &w);
+			st->below_tile_level =
+				static_cast<int>(blobs->size() + st->dropped_capacity - before);
+		} else {
+			st->below_tile_overflow = true;
 		}
-		const std::size_t before =
-			blobs->size() + static_cast<std::size_t>(st->dropped_capacity);
-		collect(image, st, blobs, &map, &w);
-		st->below_tile_level =
-			static_cast<int>(blobs->size() + st->dropped_capacity - before);
 	}
 	std::sort_heap(blobs->begin(), blobs->end(), stronger);
 	reference_ = st->threshold.valid;
@@ -819,18 +823,12 @@ bool BlobDetector::detectWindows(const ImageView &image, const PixelWindow *wind
 			st->component_overflow = impl_->overflow;
 			return false;
 		}
-		/* A component on a side of the window inside the frame may go on beyond it. */
 		const BlobMoments *comps = impl_->acc.data();
-		for (std::size_t c = 0; c < impl_->components; ++c) {
-			const BlobMoments &m = comps[c];
-			if ((w.x0 > 0 && m.x_min == w.x0) ||
-			    (w.x1 < image.width && m.x_max + 1 == w.x1) ||
-			    (w.y0 > 0 && m.y_min == w.y0) ||
-			    (w.y1 < image.height && m.y_max + 1 == w.y1)) {
+		for (std::size_t c = 0; c < impl_->components; ++c)
+			if (cutByWindow(comps[c], w, image)) {
 				st->window_cut = true;
 				return false;
 			}
-		}
 		st->components += static_cast<int>(impl_->components);
 		collect(image, st, blobs);
 	}
@@ -873,6 +871,19 @@ void BlobDetector::correctBackgroundSlope(const BlobMoments &m, Blob *b) const
 	b->cov_uu_px2 += k * (mxx * mxx + mxy * mxy);
 	b->cov_vv_px2 += k * (mxy * mxy + myy * myy);
 	b->cov_uv_px2 += k * (mxx * mxy + mxy * myy);
+}
+
+/*
+ * Does a component touch a side of `window` that lies inside the frame (so
+ * that it may go on beyond the window)? Allocates: never.
+ */
+bool BlobDetector::cutByWindow(const BlobMoments &m, const PixelWindow &window,
+			       const ImageView &image)
+{
+	return (window.x0 > 0 && m.x_min == window.x0) ||
+	       (window.x1 < image.width && m.x_max + 1 == window.x1) ||
+	       (window.y0 > 0 && m.y_min == window.y0) ||
+	       (window.y1 < image.height && m.y_max + 1 == window.y1);
 }
 
 /*
@@ -947,14 +958,9 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 	const std::size_t n = impl_->components;
 	for (std::size_t i = 0; i < n; ++i) {
 		const BlobMoments &m = comps[i];
-		/* (A component on a side of the window inside the frame may go on beyond it.) */
-		if (below &&
-		    (below->cols() == 0 || m.peak >= lowest(m) ||
-		     (window && ((window->x0 > 0 && m.x_min == window->x0) ||
-				 (window->x1 < image.width && m.x_max + 1 == window->x1) ||
-				 (window->y0 > 0 && m.y_min == window->y0) ||
-				 (window->y1 < image.height && m.y_max + 1 == window->y1))) ||
-		     !standsOut(image, m, thresholder_.contrast())))
+		if (below && (below->cols() == 0 || m.peak >= lowest(m) ||
+			      (window && cutByWindow(m, *window, image)) ||
+			      !standsOut(image, m, thresholder_.contrast())))
 			continue;
 		if (static_cast<std::int64_t>(m.area) < min_area) {
 			++st->dropped_small;

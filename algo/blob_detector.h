@@ -111,8 +111,9 @@ struct BlobFilterConfig {
 	int clip_level = 255;
 };
 
+/* The dropped counts cover both of detect()'s looks (the second: on steep tiles). */
 struct BlobStats {
-	int components = 0; /* connected components found */
+	int components = 0; /* connected components found (detect(): by its first look) */
 	int dropped_small = 0; /* specks, single pixels */
 	int dropped_large = 0;
 	int dropped_shape = 0; /* elongated or sparse */
@@ -121,6 +122,12 @@ struct BlobStats {
 	bool window_cut = false; /* detectWindows(): a component reaches beyond a window */
 	/* detect(): spots found on the threshold's cells below their tile's level (Thresholder::cellMap()) */
 	int below_tile_level = 0;
+	/*
+	 * detect(): the second look overflowed the labelling (more than
+	 * kMaxComponents in the steep tiles' box); the frame keeps the first
+	 * look's blobs and no spot below the tile level was looked for
+	 */
+	bool below_tile_overflow = false;
 	ThresholdStats threshold;
 };
 
@@ -138,7 +145,7 @@ public:
 	 * Threshold, label, measure and filter one frame. Blobs come out sorted by
 	 * weight, strongest first, at most kMaxCandidates. Returns false when the
 	 * frame cannot be processed (larger than the buffers, invalid view,
-	 * component overflow); stats says why. Allocates: never.
+	 * component overflow of its first look); stats says why. Allocates: never.
 	 */
 	bool detect(const ImageView &image, StaticVector<Blob, kMaxCandidates> *blobs,
 		    BlobStats *stats);
@@ -196,6 +203,8 @@ private:
 		     const PixelWindow *window = nullptr) const;
 	void correctBackgroundSlope(const BlobMoments &m, Blob *b) const;
 	static bool standsOut(const ImageView &image, const BlobMoments &m, int contrast);
+	static bool cutByWindow(const BlobMoments &m, const PixelWindow &window,
+				const ImageView &image);
 
 	Thresholder thresholder_;
 	BlobFilterConfig filter_;

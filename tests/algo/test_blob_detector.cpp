@@ -932,3 +932,64 @@ TEST(BlobSteepBackground, AFaintSpotAtTheFootOfABrightPatchIsFound)
 	ASSERT_TRUE(det.detect(g.view(), &blobs, &stats));
 	EXPECT_EQ(near_spot(blobs), nullptr);
 }
+
+/*
+ * The second look's labelling may overflow (more components in the steep
+ * tiles than it holds) where the first look's did not: the frame keeps what
+ * the first look found, and says that the second look was cut short.
+ */
+TEST(BlobSteepBackground, ASecondLookThatOverflowsKeepsTheFirstLooksBlobs)
+{
+	constexpr int kSize = 1024;
+	/* A ramp of 0.22 levels/px: ~14 levels over a 64 px tile, so every tile is steep. */
+	auto ramp = [](int x) {
+		return 10.0 + 0.22 * x;
+	};
+	const double spot_u = 520.4, spot_v = 500.7;
+	auto paint = [&](StridedFrame *f) {
+		for (int y = 0; y < kSize; ++y)
+			for (int x = 0; x < kSize; ++x) {
+				const double ds2 =
+					(x - spot_u) * (x - spot_u) + (y - spot_v) * (y - spot_v);
+				const double v =
+					ramp(x) + 150.0 * std::exp(-ds2 / (2.0 * 1.5 * 1.5));
+				f->at(x, y) = static_cast<std::uint8_t>(
+					std::clamp(std::lround(v), 0L, 255L));
+			}
+	};
+	StridedFrame f(kSize, kSize, kSize);
+	paint(&f);
+	BlobDetector det(kSize, kSize, ThresholdConfig{}, BlobFilterConfig{});
+	StaticVector<Blob, kMaxCandidates> blobs;
+	BlobStats stats;
+	ASSERT_TRUE(det.detect(f.view(), &blobs, &stats));
+	ASSERT_TRUE(det.thresholder().hasSteepTiles());
+	ASSERT_EQ(blobs.size(), 1U);
+	EXPECT_FALSE(stats.below_tile_overflow);
+
+	/*
+	 * Specks 3 px apart (separate components) one level above the cells' level
+	 * and below the tiles' level, wherever there is room between the two: only
+	 * the second look segments them, and there are more of them than it holds.
+	 */
+	const ThresholdMap tiles = det.thresholder().map();
+	const ThresholdMap cells = det.thresholder().cellMap();
+	int specks = 0;
+	for (int y = 1; y < kSize - 1; y += 3)
+		for (int x = 1; x < kSize - 1; x += 3) {
+			if (std::hypot(x - spot_u, y - spot_v) < 12.0)
+				continue;
+			const int level = cells.levelAt(x, y) + 1;
+			if (level + 2 <= tiles.levelAt(x, y) && level > f.at(x, y)) {
+				f.at(x, y) = static_cast<std::uint8_t>(level);
+				++specks;
+			}
+		}
+	ASSERT_GT(specks, static_cast<int>(kMaxComponents));
+	ASSERT_TRUE(det.detect(f.view(), &blobs, &stats));
+	EXPECT_FALSE(stats.component_overflow);
+	EXPECT_TRUE(stats.below_tile_overflow);
+	ASSERT_EQ(blobs.size(), 1U);
+	EXPECT_NEAR(blobs[0].u_px, spot_u, 0.2);
+	EXPECT_NEAR(blobs[0].v_px, spot_v, 0.2);
+}
