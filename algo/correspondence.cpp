@@ -664,36 +664,29 @@ double Correspondence::log10Tests(bool triangles) const
 		const double k = std::min(config_.neighbours, std::max(members - 1, 0));
 		return m * k * (k - 1.0) * (k - 2.0) / 6.0 * faces * 4.0;
 	};
-	double n = 0.0;
-	if (triangles) {
-		auto triangles_of = [&](int members) {
-			const double m = members;
-			const double k =
-				std::min(config_.triangle_neighbours, std::max(members - 1, 0));
-			return m * 0.5 * k * (k - 1.0) * faces * 48.0;
-		};
-		/* The clipped spots' triangles as the quadrilaterals' (below). */
+	auto triangles_of = [&](int members) {
+		const double m = members;
+		const double k = std::min(config_.triangle_neighbours, std::max(members - 1, 0));
+		return m * 0.5 * k * (k - 1.0) * faces * 48.0;
+	};
+	/*
+	 * The clipped spots' pass of either family counts as a second one over
+	 * every candidate where they are not known (windows: the last whole
+	 * frame's candidates are counted, not its clipped ones).
+	 */
+	auto with_second = [&](auto &&family, bool clipped_runs) {
 		double second = 0.0;
 		if (candidates > n_cand_)
-			second = triangles_of(candidates);
-		else if (clippedTriangles())
-			second = triangles_of(std::popcount(clipped_bits_));
-		n = triangles_of(candidates) + second;
-	} else {
-		/*
-		 * The clipped spots' pass counts as a second one over every
-		 * candidate where they are not known (windows: the last whole
-		 * frame's candidates are counted, not its clipped ones).
-		 */
-		double second = 0.0;
-		if (candidates > n_cand_)
-			second = quads(candidates);
-		else if (clippedPass())
-			second = quads(std::popcount(clipped_bits_));
-		/* Each set of four is formed once, in one pass or the other. */
-		n = std::min(quads(candidates) + second,
-			     std::pow(10.0, log10Choose(candidates, 4)) * faces * 4.0);
-	}
+			second = family(candidates);
+		else if (clipped_runs)
+			second = family(std::popcount(clipped_bits_));
+		return family(candidates) + second;
+	};
+	/* Each set of four is formed once, in one pass or the other. */
+	const double n =
+		triangles ? with_second(triangles_of, clippedTriangles())
+			  : std::min(with_second(quads, clippedPass()),
+				     std::pow(10.0, log10Choose(candidates, 4)) * faces * 4.0);
 	return std::log10(2.0 * std::max(n, 1.0));
 }
 
@@ -1331,38 +1324,31 @@ bool Correspondence::clippedTriangles() const
 	return clipped >= 3 && 2 * clipped < n_cand_;
 }
 
-/* Was the candidate set `set` (four bits) formed by searchQuads() over `table`? */
-bool Correspondence::formedIn(const NeighbourTable &table, std::uint64_t set)
+/* The first `first` of candidate a's neighbours in `table`, as bits. */
+std::uint64_t Correspondence::neighbourBits(const NeighbourTable &table, int a, int first)
 {
-	if ((set & table.among) != set)
-		return false;
-	for (std::uint64_t members = set; members != 0; members &= members - 1) {
-		const int x = std::countr_zero(members);
-		const std::uint64_t others = set & ~(std::uint64_t{ 1 } << x);
-		if ((table.bits[x] & others) == others)
-			return true;
-	}
-	return false;
-}
-
-/* The first triangle_neighbours of candidate a's neighbours in `table`, as bits. */
-std::uint64_t Correspondence::triangleNeighbours(const NeighbourTable &table, int a) const
-{
+	if (first >= table.n[a])
+		return table.bits[a];
 	std::uint64_t bits = 0;
-	for (int i = 0; i < std::min(table.n[a], config_.triangle_neighbours); ++i)
+	for (int i = 0; i < first; ++i)
 		bits |= std::uint64_t{ 1 } << table.list[a][i];
 	return bits;
 }
 
-/* Was the candidate set `set` (three bits) formed by searchTriangles() over `table`? */
-bool Correspondence::triangleFormedIn(const NeighbourTable &table, std::uint64_t set) const
+/*
+ * Was the candidate set `set` formed over `table` by a search that joins a
+ * candidate to its first `first` neighbours (searchQuads(): sets of four,
+ * config_.neighbours; searchTriangles(): sets of three,
+ * config_.triangle_neighbours)?
+ */
+bool Correspondence::formedIn(const NeighbourTable &table, std::uint64_t set, int first)
 {
 	if ((set & table.among) != set)
 		return false;
 	for (std::uint64_t members = set; members != 0; members &= members - 1) {
 		const int x = std::countr_zero(members);
 		const std::uint64_t others = set & ~(std::uint64_t{ 1 } << x);
-		if ((triangleNeighbours(table, x) & others) == others)
+		if ((neighbourBits(table, x, first) & others) == others)
 			return true;
 	}
 	return false;
@@ -1432,7 +1418,8 @@ bool Correspondence::searchQuads(const NeighbourTable &table, const NeighbourTab
 						earlier = m[e] < a &&
 							  (table.bits[m[e]] & others) == others;
 					}
-					if (earlier || (before && formedIn(*before, set)))
+					if (earlier ||
+					    (before && formedIn(*before, set, config_.neighbours)))
 						continue;
 					if (hypotheses_ >= quad_budget ||
 					    verified_ >= config_.max_verifications) {
@@ -1568,10 +1555,13 @@ bool Correspondence::searchTriangles(const NeighbourTable &table, const Neighbou
 				for (int e = 0; e < 2 && !earlier; ++e) {
 					const std::uint64_t others = set &
 								     ~(std::uint64_t{ 1 } << m[e]);
-					earlier = m[e] < a0 && (triangleNeighbours(table, m[e]) &
-								others) == others;
+					earlier = m[e] < a0 &&
+						  (neighbourBits(table, m[e],
+								 config_.triangle_neighbours) &
+						   others) == others;
 				}
-				if (earlier || (before && triangleFormedIn(*before, set)))
+				if (earlier ||
+				    (before && formedIn(*before, set, config_.triangle_neighbours)))
 					continue;
 				if (hypotheses_ >= budget ||
 				    verified_ >= config_.max_verifications) {

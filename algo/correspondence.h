@@ -331,11 +331,10 @@ private:
 		std::array<int, kMaxCandidates> n{};
 	};
 	void findNeighbours(std::uint64_t among, NeighbourTable *table) const;
-	std::uint64_t triangleNeighbours(const NeighbourTable &table, int a) const;
+	static std::uint64_t neighbourBits(const NeighbourTable &table, int a, int first);
 	bool clippedPass() const;
 	bool clippedTriangles() const;
-	static bool formedIn(const NeighbourTable &table, std::uint64_t set);
-	bool triangleFormedIn(const NeighbourTable &table, std::uint64_t set) const;
+	static bool formedIn(const NeighbourTable &table, std::uint64_t set, int first);
 	bool searchQuads(const NeighbourTable &table, const NeighbourTable *before);
 	bool searchTriangles(const NeighbourTable &table, const NeighbourTable *before);
 	bool fullSearch(const Pose *reference, CorrespondenceResult *result);

@@ -13,6 +13,17 @@ namespace dockpose {
 
 namespace {
 
+/*
+ * The guarded background of tile (c, r) in a grid `cols` wide, padded by one
+ * tile of extrapolation on every side (c in [-1, cols], r in [-1, rows]): its
+ * index in Thresholder::padded_.
+ */
+std::size_t paddedIndex(int cols, int c, int r)
+{
+	return static_cast<std::size_t>(r + 1) * static_cast<std::size_t>(cols + 2) +
+	       static_cast<std::size_t>(c + 1);
+}
+
 /* 1.4826 / sqrt(2): from the MAD of a difference of two pixels to one pixel's sigma. */
 constexpr UQ16_16 kMadToSigma{ 1.4826 * 0.70710678118654752440 };
 
@@ -131,6 +142,7 @@ Thresholder::Thresholder(int max_width, int max_height, const ThresholdConfig &c
 	medians_.assign(static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows), 0);
 	padded_.assign(static_cast<std::size_t>(cols + 2) * static_cast<std::size_t>(rows + 2), 0);
 	corners_.assign(static_cast<std::size_t>(cols + 1) * static_cast<std::size_t>(rows + 1), 0);
+	steep_.assign(static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows), 0);
 	slopes_.assign(static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows), SlopeFit{});
 }
 
@@ -386,10 +398,8 @@ void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
 	 * extrapolation.
 	 */
 	const std::int64_t margin = std::max<std::int64_t>(1, contrast.toIntFloor() / 4);
-	const int pcols = cols + 2;
 	auto P = [&](int c, int r) -> std::int32_t & {
-		return padded_[static_cast<std::size_t>(r + 1) * pcols +
-			       static_cast<std::size_t>(c + 1)];
+		return padded_[paddedIndex(cols, c, r)];
 	};
 	auto median = [&](int c, int r) -> int {
 		return medians_[static_cast<std::size_t>(r) * cols + c];
@@ -496,12 +506,8 @@ void Thresholder::computeCells(int width, int height, int cols, int rows, UQ16_1
 	const int tile = tile_px_;
 	const int cell = cellPx(tile);
 	steep_box_ = PixelWindow{};
-	if (!cell_map_.reshape(width, height, cell))
-		return;
-	const int pcols = cols + 2;
 	auto P = [&](int c, int r) -> std::int64_t {
-		return padded_[static_cast<std::size_t>(r + 1) * pcols +
-			       static_cast<std::size_t>(c + 1)];
+		return padded_[paddedIndex(cols, c, r)];
 	};
 	const int ccols = corners_.empty() ? 0 : cols + 1;
 	auto corner = [&](int i, int j) -> std::int64_t {
@@ -515,7 +521,6 @@ void Thresholder::computeCells(int width, int height, int cols, int rows, UQ16_1
 	 * the contrast. The others' cells take the tile's level.
 	 */
 	const std::int64_t steep4 = 4 * contrast.toIntRound();
-	const int per_tile = tile / cell;
 	int c_lo = cols, c_hi = -1, r_lo = rows, r_hi = -1;
 	for (int r = 0; r < rows; ++r)
 		for (int c = 0; c < cols; ++c) {
@@ -523,12 +528,24 @@ void Thresholder::computeCells(int width, int height, int cols, int rows, UQ16_1
 						    corner(c, r + 1), corner(c + 1, r + 1) };
 			const auto [lo, hi] = std::minmax_element(v, v + 5);
 			const bool steep = *hi - *lo >= steep4;
+			steep_[static_cast<std::size_t>(r) * cols + c] = steep ? 1 : 0;
 			if (steep) {
 				c_lo = std::min(c_lo, c);
 				c_hi = std::max(c_hi, c);
 				r_lo = std::min(r_lo, r);
 				r_hi = std::max(r_hi, r);
 			}
+		}
+	steep_tiles_ = c_hi >= 0;
+	/* No steep tile (most frames): the cells are the tiles. */
+	const int per_tile = steep_tiles_ ? tile / cell : 1;
+	if (!cell_map_.reshape(width, height, steep_tiles_ ? cell : tile)) {
+		steep_tiles_ = false;
+		return;
+	}
+	for (int r = 0; r < rows; ++r)
+		for (int c = 0; c < cols; ++c) {
+			const bool steep = steep_[static_cast<std::size_t>(r) * cols + c] != 0;
 			const std::uint8_t level = map_.level(c, r);
 			for (int j = r * per_tile;
 			     j < std::min((r + 1) * per_tile, cell_map_.rows()); ++j)
@@ -536,7 +553,6 @@ void Thresholder::computeCells(int width, int height, int cols, int rows, UQ16_1
 				     i < std::min((c + 1) * per_tile, cell_map_.cols()); ++i)
 					cell_map_.setLevel(i, j, steep ? 0 : level);
 		}
-	steep_tiles_ = c_hi >= 0;
 	if (!steep_tiles_)
 		return;
 
@@ -621,7 +637,6 @@ bool Thresholder::backgroundSlope(double u_px, double v_px, double *gx, double *
 	if (cols_ < 2 || rows_ < 2)
 		return false;
 	const int tile = tile_px_;
-	const int pcols = cols_ + 2;
 	const int c_at = std::clamp(static_cast<int>(u_px) / tile, 0, cols_ - 1);
 	const int r_at = std::clamp(static_cast<int>(v_px) / tile, 0, rows_ - 1);
 	SlopeFit &fit = slopes_[static_cast<std::size_t>(r_at) * cols_ + c_at];
@@ -650,8 +665,7 @@ bool Thresholder::backgroundSlope(double u_px, double v_px, double *gx, double *
 		const double y = centre(r, height_);
 		for (int c = c0; c <= c1; ++c) {
 			const double x = centre(c, width_);
-			const double b = padded_[static_cast<std::size_t>(r + 1) * pcols +
-						 static_cast<std::size_t>(c + 1)];
+			const double b = padded_[paddedIndex(cols_, c, r)];
 			const double f[3] = { 1.0, x - u0_px, y - v0_px };
 			for (int i = 0; i < 3; ++i) {
 				for (int j = 0; j < 3; ++j)

@@ -181,7 +181,8 @@ public:
 	 * and a faint LED at the foot of the flank lies below it; the cell's
 	 * level follows the flank. Only steep tiles (the interpolation spans the
 	 * contrast or more over them) get cells of their own; the others' cells
-	 * keep the tile's level. hasSteepTiles(): there is one.
+	 * keep the tile's level. hasSteepTiles(): there is one; without, the
+	 * cells are the tiles (the map equals map()).
 	 * Allocates: never.
 	 */
 	const ThresholdMap &cellMap() const { return cell_map_; }
@@ -242,6 +243,7 @@ private:
 	std::vector<std::uint8_t> medians_;
 	std::vector<std::int32_t> padded_;
 	std::vector<std::int32_t> corners_;
+	std::vector<std::uint8_t> steep_; /* per tile of the last Auto compute(): 1 when steep */
 	/* backgroundSlope()'s fit by tile, valid while its generation is compute()'s. */
 	struct SlopeFit {
 		double gx = 0.0, gy = 0.0, sigma = 0.0;
