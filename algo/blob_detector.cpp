@@ -558,6 +558,9 @@ BlobDetector::BlobDetector(int max_width, int max_height, const ThresholdConfig 
 {
 	filter_.fill_gap_px = std::clamp(filter_.fill_gap_px, 0, kMaxFrameSide);
 	filter_.clip_level = std::clamp(filter_.clip_level, 1, 256);
+	/* (256: nothing clips, and no core is looked for: merged() needs a clipped pixel.) */
+	clip_map_ =
+		ThresholdMap::uniform(static_cast<std::uint8_t>(std::min(filter_.clip_level, 255)));
 }
 
 BlobDetector::~BlobDetector()
@@ -764,7 +767,8 @@ bool BlobDetector::detect(const ImageView &image, StaticVector<Blob, kMaxCandida
 		return false;
 	}
 	st->components = static_cast<int>(impl_->components);
-	collect(image, st, blobs);
+	merged_.clear();
+	collect(image, st, blobs, Look::First);
 	/*
 	 * On a steep background the cells' finer levels (Thresholder::cellMap())
 	 * find spots below their tile's level: a second labelling at those
@@ -783,13 +787,23 @@ bool BlobDetector::detect(const ImageView &image, StaticVector<Blob, kMaxCandida
 				 filter_.clip_level, w)) {
 			const std::size_t before =
 				blobs->size() + static_cast<std::size_t>(st->dropped_capacity);
-			collect(image, st, blobs, &map, &w);
+			collect(image, st, blobs, Look::BelowTiles, &w);
 			st->below_tile_level =
 				static_cast<int>(blobs->size() + st->dropped_capacity - before);
 		} else {
 			st->below_tile_overflow = true;
 		}
 	}
+	/*
+	 * A third look, at the clip level, in the box of each component that
+	 * clipped but was dropped (too large, or not spot-shaped): an LED driven
+	 * to clip and merged with a bright surrounding keeps a clipped core of its
+	 * own. Cores that overlap a blob found already, or reach the box's side,
+	 * are not new.
+	 */
+	for (const PixelWindow &w : merged_)
+		if (impl_->label(image, clip_map_, filter_.fill_gap_px, filter_.clip_level, w))
+			collect(image, st, blobs, Look::Cores, &w);
 	std::sort_heap(blobs->begin(), blobs->end(), stronger);
 	reference_ = st->threshold.valid;
 	reference_threshold_ = st->threshold;
@@ -830,7 +844,7 @@ bool BlobDetector::detectWindows(const ImageView &image, const PixelWindow *wind
 				return false;
 			}
 		st->components += static_cast<int>(impl_->components);
-		collect(image, st, blobs);
+		collect(image, st, blobs, Look::Windows);
 	}
 	std::sort_heap(blobs->begin(), blobs->end(), stronger);
 	return true;
@@ -871,6 +885,60 @@ void BlobDetector::correctBackgroundSlope(const BlobMoments &m, Blob *b) const
 	b->cov_uu_px2 += k * (mxx * mxx + mxy * mxy);
 	b->cov_vv_px2 += k * (mxy * mxy + myy * myy);
 	b->cov_uv_px2 += k * (mxx * mxy + mxy * myy);
+}
+
+/*
+ * Are a component's clipped pixels, taken alone, shaped like a spot (or a
+ * few: LEDs whose blooms merged) rather than a streak: their second moments
+ * within the filter's max_elongation? A glint's clipped line, broken by the
+ * noise into specks, is not. Allocates: never.
+ */
+bool BlobDetector::clippedLikeASpot(const BlobMoments &m) const
+{
+	if (m.saturated == 0)
+		return false;
+	const double n = static_cast<double>(m.saturated);
+	const double mx = static_cast<double>(m.sat_x) / n, my = static_cast<double>(m.sat_y) / n;
+	const double vxx = static_cast<double>(m.sat_xx) / n - mx * mx + 1.0 / 12.0;
+	const double vyy = static_cast<double>(m.sat_yy) / n - my * my + 1.0 / 12.0;
+	const double vxy = static_cast<double>(m.sat_xy) / n - mx * my;
+	const double mean = 0.5 * (vxx + vyy);
+	const double root = std::sqrt(0.25 * (vxx - vyy) * (vxx - vyy) + vxy * vxy);
+	const double minor = std::max(mean - root, 1.0 / 12.0 * 1e-6);
+	return (mean + root) <= filter_.max_elongation * filter_.max_elongation * minor;
+}
+
+/*
+ * Is a component labelled at the clip level a plateau, not noise: does it
+ * hold a pixel whose 3 x 3 neighbourhood clips whole? An LED driven beyond
+ * the clip level clips solidly; where a surrounding's brightest part only
+ * reaches the clip level, the noise clips a scatter of specks, and a 3 x 3
+ * block of them is rare. Allocates: never.
+ */
+bool BlobDetector::solidCore(const ImageView &image, const BlobMoments &m) const
+{
+	const int clip = filter_.clip_level;
+	for (int y = m.y_min + 1; y < m.y_max; ++y)
+		for (int x = m.x_min + 1; x < m.x_max; ++x) {
+			bool solid = true;
+			for (int dy = -1; dy <= 1 && solid; ++dy)
+				for (int dx = -1; dx <= 1 && solid; ++dx)
+					solid = image.at(x + dx, y + dy) >= clip;
+			if (solid)
+				return true;
+		}
+	return false;
+}
+
+/* Does a component's box overlap the box of one of `blobs`? Allocates: never. */
+bool BlobDetector::overlapsBlob(const BlobMoments &m,
+				const StaticVector<Blob, kMaxCandidates> &blobs)
+{
+	for (const Blob &b : blobs)
+		if (m.x_min <= b.x_max && b.x_min <= m.x_max && m.y_min <= b.y_max &&
+		    b.y_min <= m.y_max)
+			return true;
+	return false;
 }
 
 /*
@@ -930,9 +998,10 @@ bool BlobDetector::standsOut(const ImageView &image, const BlobMoments &m, int c
 
 /* Filter and measure the components of the last labelling into the heap `blobs`. */
 void BlobDetector::collect(const ImageView &image, BlobStats *st,
-			   StaticVector<Blob, kMaxCandidates> *blobs, const ThresholdMap *below,
-			   const PixelWindow *window) const
+			   StaticVector<Blob, kMaxCandidates> *blobs, Look look,
+			   const PixelWindow *window)
 {
+	const ThresholdMap *below = look == Look::BelowTiles ? &thresholder_.map() : nullptr;
 	/* The lowest level of `below` over the tiles a component's box touches. */
 	auto lowest = [below](const BlobMoments &m) {
 		const int tile = below->tilePx();
@@ -962,17 +1031,45 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 			      (window && cutByWindow(m, *window, image)) ||
 			      !standsOut(image, m, thresholder_.contrast())))
 			continue;
+		if (look == Look::Cores && ((window && cutByWindow(m, *window, image)) ||
+					    overlapsBlob(m, *blobs) || !solidCore(image, m)))
+			continue;
+		/*
+		 * A component with clipped pixels among others that the filter
+		 * drops may be an LED's clipped core merged with a bright
+		 * surrounding (a sunlit patch, a reflection, another LED's bloom):
+		 * its box is looked at again for clipped cores of their own.
+		 */
+		auto merged = [&] {
+			if (look == Look::First && m.saturated > 0 && m.saturated < m.area &&
+			    clippedLikeASpot(m) && !merged_.full())
+				merged_.push_back(
+					PixelWindow{ m.x_min, m.y_min, m.x_max + 1, m.y_max + 1 });
+		};
 		if (static_cast<std::int64_t>(m.area) < min_area) {
 			++st->dropped_small;
 			continue;
 		}
 		if (static_cast<std::int64_t>(m.area) > max_area) {
 			++st->dropped_large;
+			merged();
 			continue;
 		}
 		Blob b = measure(m, noise);
-		if (b.cov_uu_px2 > 0.0)
+		if (look == Look::Cores) {
+			/*
+			 * The core's centroid is its clipped plateau's; a brighter
+			 * surrounding on one side (what merged it) pushes the plateau's
+			 * edge out there. One pixel along half the edge of a disc moves
+			 * its centroid by 4 / pi^2 px, whatever its radius: that, per axis.
+			 */
+			constexpr double kHalfEdgeShift =
+				4.0 / (std::numbers::pi * std::numbers::pi);
+			b.cov_uu_px2 += kHalfEdgeShift * kHalfEdgeShift;
+			b.cov_vv_px2 += kHalfEdgeShift * kHalfEdgeShift;
+		} else if (b.cov_uu_px2 > 0.0) {
 			correctBackgroundSlope(m, &b);
+		}
 		if (b.cov_uu_px2 > 0.0 && m.saturated == 0)
 			fitSmallSpot(image, std::max(noise * noise, kQuantisationVar), &b);
 		/*
@@ -989,8 +1086,10 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 		}
 		if (b.elongation > filter_.max_elongation || b.fill < filter_.min_fill) {
 			++st->dropped_shape;
+			merged();
 			continue;
 		}
+		st->clipped_cores += look == Look::Cores ? 1 : 0;
 		if (!blobs->full()) {
 			blobs->push_back(b);
 			std::push_heap(blobs->begin(), blobs->end(), stronger);

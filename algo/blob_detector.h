@@ -128,6 +128,11 @@ struct BlobStats {
 	 * look's blobs and no spot below the tile level was looked for
 	 */
 	bool below_tile_overflow = false;
+	/*
+	 * detect(): clipped cores found at the clip level inside components that
+	 * clipped but were dropped (an LED merged with a bright surrounding)
+	 */
+	int clipped_cores = 0;
 	ThresholdStats threshold;
 };
 
@@ -193,22 +198,38 @@ private:
 	const BlobMoments *components() const;
 	/*
 	 * The last labelling's components that pass the filter, into the heap
-	 * `blobs`. With `below`: only those whose peak lies below every level of
-	 * `below` around them (none of their pixels reaches that map), that stand
-	 * out of their surroundings (standsOut()) and, labelled in `window`, do
-	 * not reach its sides inside the frame.
+	 * `blobs`. First: every one; the boxes of those dropped that clipped go
+	 * to merged_. Windows: every one. BelowTiles: only those whose peak lies
+	 * below every tile level around them (none of their pixels reaches the
+	 * tiles' map), that stand out of their surroundings (standsOut()) and do
+	 * not reach `window`'s sides inside the frame. Cores: only those that do
+	 * not reach `window`'s sides inside the frame nor overlap a blob's box.
 	 */
+	enum class Look {
+		First, /* detect(): the tiles' levels */
+		Windows, /* detectWindows(): the tiles' levels in a window */
+		BelowTiles, /* detect(): the steep tiles' cells, below the tiles' levels */
+		Cores, /* detect(): the clip level, in the box of a dropped component that clipped */
+	};
 	void collect(const ImageView &image, BlobStats *stats,
-		     StaticVector<Blob, kMaxCandidates> *blobs, const ThresholdMap *below = nullptr,
-		     const PixelWindow *window = nullptr) const;
+		     StaticVector<Blob, kMaxCandidates> *blobs, Look look,
+		     const PixelWindow *window = nullptr);
 	void correctBackgroundSlope(const BlobMoments &m, Blob *b) const;
 	static bool standsOut(const ImageView &image, const BlobMoments &m, int contrast);
 	static bool cutByWindow(const BlobMoments &m, const PixelWindow &window,
 				const ImageView &image);
+	bool clippedLikeASpot(const BlobMoments &m) const;
+	bool solidCore(const ImageView &image, const BlobMoments &m) const;
+	static bool overlapsBlob(const BlobMoments &m,
+				 const StaticVector<Blob, kMaxCandidates> &blobs);
 
 	Thresholder thresholder_;
 	BlobFilterConfig filter_;
 	Impl *impl_;
+	/* Every pixel at the clip level: the third look's map. */
+	ThresholdMap clip_map_;
+	/* The first look's dropped components that clipped (their boxes): the third look's windows. */
+	StaticVector<PixelWindow, kMaxMergedCores> merged_;
 	/* The last successful detect(): its map is thresholder_.map(). */
 	bool reference_ = false;
 	ThresholdStats reference_threshold_;

@@ -17,6 +17,12 @@ inline constexpr std::size_t kMaxFaces = 8;
 inline constexpr std::size_t kMaxCandidates = 64;
 /* Connected components tracked while labelling one frame (before filtering). */
 inline constexpr std::size_t kMaxComponents = 16384;
+/*
+ * Components of one frame dropped by the blob filter that clipped, whose
+ * boxes are looked at again for clipped cores (an LED merged with a bright
+ * surrounding); beyond these, the rest are not looked at.
+ */
+inline constexpr std::size_t kMaxMergedCores = 16;
 /* Largest frame the pipeline accepts, in pixels per side. */
 inline constexpr int kMaxFrameSide = 8192;
 

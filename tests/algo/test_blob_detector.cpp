@@ -993,3 +993,75 @@ TEST(BlobSteepBackground, ASecondLookThatOverflowsKeepsTheFirstLooksBlobs)
 	EXPECT_NEAR(blobs[0].u_px, spot_u, 0.2);
 	EXPECT_NEAR(blobs[0].v_px, spot_v, 0.2);
 }
+
+/*
+ * An LED that clips, merged with a bright surrounding (here a reflection too
+ * large for a spot, touching it): the first look drops the merged component,
+ * the third finds the LED's clipped core at its centre, with the plateau's
+ * edge uncertainty in its covariance. An LED that clips on its own is found
+ * once, and a surrounding without a clipped core adds nothing.
+ */
+TEST(BlobClippedCores, AnLedMergedWithABrightPatchKeepsItsCore)
+{
+	constexpr int kSize = 256;
+	const double led_u = 100.3, led_v = 120.6;
+	std::mt19937 rng(11);
+	std::normal_distribution<double> noise(0.0, 2.0);
+	auto paint = [&](StridedFrame *f, bool led, bool patch, double led_peak) {
+		for (int y = 0; y < kSize; ++y)
+			for (int x = 0; x < kSize; ++x) {
+				const double d2 =
+					(x - led_u) * (x - led_u) + (y - led_v) * (y - led_v);
+				double v = 20.0 + noise(rng);
+				/* The reflection: 60 x 40 px at 150 levels, its left side 6 px right of the LED's centre. */
+				if (patch && x >= 106 && x < 166 && y >= 100 && y < 140)
+					v += 130.0;
+				if (led)
+					v += led_peak * std::exp(-d2 / (2.0 * 3.0 * 3.0));
+				f->at(x, y) = static_cast<std::uint8_t>(
+					std::clamp(std::lround(v), 0L, 255L));
+			}
+	};
+	BlobDetector det(kSize, kSize, ThresholdConfig{}, BlobFilterConfig{});
+	StaticVector<Blob, kMaxCandidates> blobs;
+	BlobStats stats;
+	auto near_led = [&] {
+		int n = 0;
+		const Blob *found = nullptr;
+		for (const Blob &b : blobs)
+			if (std::hypot(b.u_px - led_u, b.v_px - led_v) < 3.0) {
+				found = &b;
+				++n;
+			}
+		return std::make_pair(found, n);
+	};
+
+	StridedFrame merged(kSize, kSize, kSize);
+	paint(&merged, true, true, 800.0);
+	ASSERT_TRUE(det.detect(merged.view(), &blobs, &stats));
+	EXPECT_GE(stats.dropped_large, 1);
+	EXPECT_EQ(stats.clipped_cores, 1);
+	const auto [core, cores] = near_led();
+	ASSERT_NE(core, nullptr);
+	EXPECT_EQ(cores, 1);
+	EXPECT_GT(core->saturated_px, 0);
+	/* The patch pushes the plateau's right edge out: within the covariance it states. */
+	EXPECT_LT(std::abs(core->u_px - led_u), 3.0 * std::sqrt(core->cov_uu_px2));
+	EXPECT_LT(std::abs(core->v_px - led_v), 3.0 * std::sqrt(core->cov_vv_px2));
+	const double edge = 4.0 / (std::numbers::pi * std::numbers::pi);
+	EXPECT_GE(core->cov_uu_px2, edge * edge);
+
+	/* The LED alone: one blob, from the first look. */
+	StridedFrame alone(kSize, kSize, kSize);
+	paint(&alone, true, false, 800.0);
+	ASSERT_TRUE(det.detect(alone.view(), &blobs, &stats));
+	EXPECT_EQ(stats.clipped_cores, 0);
+	EXPECT_EQ(near_led().second, 1);
+
+	/* An LED that does not clip, merged with the patch: nothing to split, nothing added. */
+	StridedFrame dim(kSize, kSize, kSize);
+	paint(&dim, true, true, 90.0);
+	ASSERT_TRUE(det.detect(dim.view(), &blobs, &stats));
+	EXPECT_EQ(stats.clipped_cores, 0);
+	EXPECT_EQ(near_led().second, 0);
+}
