@@ -559,6 +559,7 @@ BlobDetector::BlobDetector(int max_width, int max_height, const ThresholdConfig 
 	filter_.fill_gap_px = std::clamp(filter_.fill_gap_px, 0, kMaxFrameSide);
 	filter_.clip_level = std::clamp(filter_.clip_level, 1, 256);
 	/* (256: nothing clips, and no core is looked for: merged() needs a clipped pixel.) */
+	peak_map_ = ThresholdMap(thresholder_.maxWidth(), thresholder_.maxHeight(), 1);
 	clip_map_ =
 		ThresholdMap::uniform(static_cast<std::uint8_t>(std::min(filter_.clip_level, 255)));
 }
@@ -767,7 +768,7 @@ bool BlobDetector::detect(const ImageView &image, StaticVector<Blob, kMaxCandida
 		return false;
 	}
 	st->components = static_cast<int>(impl_->components);
-	merged_.clear();
+	dropped_.clear();
 	collect(image, st, blobs, Look::First);
 	/*
 	 * On a steep background the cells' finer levels (Thresholder::cellMap())
@@ -801,9 +802,17 @@ bool BlobDetector::detect(const ImageView &image, StaticVector<Blob, kMaxCandida
 	 * own. Cores that overlap a blob found already, or reach the box's side,
 	 * are not new.
 	 */
-	for (const PixelWindow &w : merged_)
-		if (impl_->label(image, clip_map_, filter_.fill_gap_px, filter_.clip_level, w))
-			collect(image, st, blobs, Look::Cores, &w);
+	for (const Dropped &d : dropped_)
+		if (d.clipped &&
+		    impl_->label(image, clip_map_, filter_.fill_gap_px, filter_.clip_level, d.box))
+			collect(image, st, blobs, Look::Cores, &d.box);
+	/*
+	 * A fourth look in the same boxes: spots that do not clip, on a
+	 * surrounding above their tile's level (lookForPeaks()).
+	 */
+	int peaks = 0;
+	for (const Dropped &d : dropped_)
+		lookForPeaks(image, d.box, st, blobs, &peaks);
 	std::sort_heap(blobs->begin(), blobs->end(), stronger);
 	reference_ = st->threshold.valid;
 	reference_threshold_ = st->threshold;
@@ -861,30 +870,44 @@ bool BlobDetector::detectWindows(const ImageView &image, const PixelWindow *wind
  */
 void BlobDetector::correctBackgroundSlope(const BlobMoments &m, Blob *b) const
 {
+	const SpotMoments s = spotMoments(m, b->u_px, b->v_px);
+	/* A slope of 0.05 levels/px (70 levels across a 1456 px frame) moves it by less than 0.002 px. */
+	if (!(s.w > 0.0) || (s.mxx + s.myy) / s.w < 0.04)
+		return;
+	double gx = 0.0, gy = 0.0, sg = 0.0;
+	if (!thresholder_.backgroundSlope(b->u_px, b->v_px, &gx, &gy, &sg))
+		return;
+	b->u_px -= (s.mxx * gx + s.mxy * gy) / s.w;
+	b->v_px -= (s.mxy * gx + s.myy * gy) / s.w;
+	addSlopeVariance(s, sg, b);
+}
+
+BlobDetector::SpotMoments BlobDetector::spotMoments(const BlobMoments &m, double u, double v)
+{
+	SpotMoments s;
 	const std::uint64_t n_seg = std::uint64_t{ m.noisy } + m.saturated;
 	const double w =
 		static_cast<double>(m.sum_w + m.sum_t - std::uint64_t{ m.level_min } * n_seg);
 	if (n_seg == 0 || !(w > 0.0))
-		return;
+		return s;
 	const double n = static_cast<double>(n_seg);
-	const double u = b->u_px, v = b->v_px;
 	const double sx = static_cast<double>(m.sum_x + m.sat_x),
 		     sy = static_cast<double>(m.sum_y + m.sat_y);
-	const double mxx = static_cast<double>(m.sum_xx + m.sat_xx) - 2.0 * u * sx + n * u * u;
-	const double myy = static_cast<double>(m.sum_yy + m.sat_yy) - 2.0 * v * sy + n * v * v;
-	const double mxy = static_cast<double>(m.sum_xy + m.sat_xy) - u * sy - v * sx + n * u * v;
-	/* A slope of 0.05 levels/px (70 levels across a 1456 px frame) moves it by less than 0.002 px. */
-	if ((mxx + myy) / w < 0.04)
+	s.w = w;
+	s.mxx = static_cast<double>(m.sum_xx + m.sat_xx) - 2.0 * u * sx + n * u * u;
+	s.myy = static_cast<double>(m.sum_yy + m.sat_yy) - 2.0 * v * sy + n * v * v;
+	s.mxy = static_cast<double>(m.sum_xy + m.sat_xy) - u * sy - v * sx + n * u * v;
+	return s;
+}
+
+void BlobDetector::addSlopeVariance(const SpotMoments &s, double sigma_slope, Blob *b)
+{
+	if (!(s.w > 0.0))
 		return;
-	double gx = 0.0, gy = 0.0, sg = 0.0;
-	if (!thresholder_.backgroundSlope(u, v, &gx, &gy, &sg))
-		return;
-	b->u_px = u - (mxx * gx + mxy * gy) / w;
-	b->v_px = v - (mxy * gx + myy * gy) / w;
-	const double k = sg * sg / (w * w);
-	b->cov_uu_px2 += k * (mxx * mxx + mxy * mxy);
-	b->cov_vv_px2 += k * (mxy * mxy + myy * myy);
-	b->cov_uv_px2 += k * (mxx * mxy + mxy * myy);
+	const double k = sigma_slope * sigma_slope / (s.w * s.w);
+	b->cov_uu_px2 += k * (s.mxx * s.mxx + s.mxy * s.mxy);
+	b->cov_vv_px2 += k * (s.mxy * s.mxy + s.myy * s.myy);
+	b->cov_uv_px2 += k * (s.mxx * s.mxy + s.mxy * s.myy);
 }
 
 /*
@@ -928,6 +951,138 @@ bool BlobDetector::solidCore(const ImageView &image, const BlobMoments &m) const
 				return true;
 		}
 	return false;
+}
+
+namespace {
+
+/* The ring round a peak (BlobDetector::peakAt()): kPeakRing offsets, evenly round, radius kPeakRingPx. */
+constexpr std::size_t kPeakRing = 16;
+const std::array<std::array<int, 2>, kPeakRing> &peakRing()
+{
+	static const auto ring = [] {
+		std::array<std::array<int, 2>, kPeakRing> o{};
+		for (std::size_t k = 0; k < kPeakRing; ++k) {
+			const double a = 2.0 * std::numbers::pi * static_cast<double>(k) /
+					 static_cast<double>(kPeakRing);
+			o[k] = { static_cast<int>(std::lround(kPeakRingPx * std::cos(a))),
+				 static_cast<int>(std::lround(kPeakRingPx * std::sin(a))) };
+		}
+		return o;
+	}();
+	return ring;
+}
+
+} /* namespace */
+
+/*
+ * Inside `box` (a dropped component's), every local maximum that does not
+ * clip and stands the contrast above the median of a ring of radius
+ * kPeakRingPx round it, where the ring departs from its plane (its median,
+ * and the slopes of its opposite samples) by no more than the contrast: the
+ * plane plus the contrast is the level, pixel by
+ * pixel, of a labelling of the square window that the ring bounds; the
+ * component holding the maximum is a new blob when it passes the filter,
+ * stays inside the window and overlaps no blob found already. At most
+ * kMaxInnerPeaks labellings per frame (*peaks counts them). Allocates: never.
+ */
+void BlobDetector::lookForPeaks(const ImageView &image, const PixelWindow &box, BlobStats *st,
+				StaticVector<Blob, kMaxCandidates> *blobs, int *peaks)
+{
+	constexpr int kR = kPeakRingPx;
+	const int clip = filter_.clip_level;
+	const int x0 = std::max(box.x0, kR), x1 = std::min(box.x1, image.width - kR);
+	const int y0 = std::max(box.y0, kR), y1 = std::min(box.y1, image.height - kR);
+	const ThresholdMap &tiles = thresholder_.map();
+	const int tile = tiles.tilePx();
+	for (int y = y0; y < y1; ++y) {
+		const std::uint8_t *up = image.row(y - 1), *row = image.row(y),
+				   *down = image.row(y + 1);
+		for (int x = x0; x < x1;) {
+			/* Tile by tile along the row, so the level is looked up once per tile. */
+			const int end = std::min(x1, (x / tile + 1) * tile);
+			const int level = tiles.levelAt(x, y);
+			for (; x < end; ++x) {
+				const int v = row[x];
+				/*
+				 * Only where the first look segmented (the dropped
+				 * component's pixels are there); a maximum: above the
+				 * neighbours before it in scan order, not below those after.
+				 */
+				if (v < level || v >= clip || v <= row[x - 1] || v <= up[x - 1] ||
+				    v <= up[x] || v <= up[x + 1] || v < row[x + 1] ||
+				    v < down[x - 1] || v < down[x] || v < down[x + 1])
+					continue;
+				peakAt(image, x, y, v, st, blobs, peaks);
+				if (*peaks >= static_cast<int>(kMaxInnerPeaks))
+					return;
+			}
+		}
+	}
+}
+
+/*
+ * lookForPeaks()'s test and labelling of one local maximum v at (x, y), at
+ * least kPeakRingPx inside the frame. Allocates: never.
+ */
+void BlobDetector::peakAt(const ImageView &image, int x, int y, int v, BlobStats *st,
+			  StaticVector<Blob, kMaxCandidates> *blobs, int *peaks)
+{
+	constexpr int kR = kPeakRingPx;
+	constexpr std::size_t kRing = kPeakRing;
+	const auto &ring = peakRing();
+	const int contrast = thresholder_.contrast();
+	std::array<int, kRing> s{};
+	for (std::size_t k = 0; k < kRing; ++k)
+		s[k] = image.at(x + ring[k][0], y + ring[k][1]);
+	std::array<int, kRing> sorted = s;
+	std::nth_element(sorted.begin(), sorted.begin() + kRing / 2, sorted.end());
+	const int base = sorted[kRing / 2];
+	if (v < base + contrast)
+		return;
+	/* The slopes: s_k - s_(k+8) = 2 (gx dx_k + gy dy_k), least squares over the 8 pairs. */
+	double sxx = 0.0, syy = 0.0, sxy = 0.0, bx = 0.0, by = 0.0;
+	for (std::size_t k = 0; k < kRing / 2; ++k) {
+		const double dx = ring[k][0], dy = ring[k][1];
+		const double d = 0.5 * (s[k] - s[k + kRing / 2]);
+		sxx += dx * dx;
+		syy += dy * dy;
+		sxy += dx * dy;
+		bx += dx * d;
+		by += dy * d;
+	}
+	const double det = sxx * syy - sxy * sxy;
+	const double gx = (syy * bx - sxy * by) / det;
+	const double gy = (sxx * by - sxy * bx) / det;
+	/* The ring's rms departure from the plane, at least the noise's. */
+	double misfit2 = 0.0;
+	for (std::size_t k = 0; k < kRing; ++k) {
+		const double e = s[k] - (base + gx * ring[k][0] + gy * ring[k][1]);
+		misfit2 += e * e;
+	}
+	peak_misfit_ = std::max(std::sqrt(misfit2 / kRing), st->threshold.noise_sigma);
+	/*
+	 * The plane is the peak's background only where the ring lies on
+	 * one smooth surface: departing from it by more than the
+	 * contrast, the ring straddles an edge (a patch's side, another
+	 * spot), where the peak is not a spot's.
+	 */
+	if (peak_misfit_ > contrast)
+		return;
+	if (*peaks >= static_cast<int>(kMaxInnerPeaks))
+		return;
+	++*peaks;
+	const PixelWindow w{ x - kR, y - kR, x + kR + 1, y + kR + 1 };
+	for (int py = w.y0; py < w.y1; ++py)
+		for (int px = w.x0; px < w.x1; ++px) {
+			const double level = base + gx * (px - x) + gy * (py - y) + contrast;
+			peak_map_.setLevel(px, py,
+					   static_cast<std::uint8_t>(
+						   std::clamp(std::lround(level), 1L, 255L)));
+		}
+	peak_x_ = x;
+	peak_y_ = y;
+	if (impl_->label(image, peak_map_, filter_.fill_gap_px, filter_.clip_level, w))
+		collect(image, st, blobs, Look::Peaks, &w);
 }
 
 /* Does a component's box overlap the box of one of `blobs`? Allocates: never. */
@@ -1034,17 +1189,24 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 		if (look == Look::Cores && ((window && cutByWindow(m, *window, image)) ||
 					    overlapsBlob(m, *blobs) || !solidCore(image, m)))
 			continue;
+		if (look == Look::Peaks &&
+		    (!window || cutByWindow(m, *window, image) || m.x_min > peak_x_ ||
+		     m.x_max < peak_x_ || m.y_min > peak_y_ || m.y_max < peak_y_ ||
+		     overlapsBlob(m, *blobs)))
+			continue;
 		/*
-		 * A component with clipped pixels among others that the filter
-		 * drops may be an LED's clipped core merged with a bright
-		 * surrounding (a sunlit patch, a reflection, another LED's bloom):
-		 * its box is looked at again for clipped cores of their own.
+		 * A component that the filter drops may hold an LED merged with a
+		 * bright surrounding (a sunlit patch, a reflection, another LED's
+		 * bloom): its box is looked at again, for clipped cores of their own
+		 * where it clipped, and for peaks that stand out of the
+		 * surrounding's own level.
 		 */
 		auto merged = [&] {
-			if (look == Look::First && m.saturated > 0 && m.saturated < m.area &&
-			    clippedLikeASpot(m) && !merged_.full())
-				merged_.push_back(
-					PixelWindow{ m.x_min, m.y_min, m.x_max + 1, m.y_max + 1 });
+			if (look == Look::First && !dropped_.full())
+				dropped_.push_back(Dropped{
+					PixelWindow{ m.x_min, m.y_min, m.x_max + 1, m.y_max + 1 },
+					m.saturated > 0 && m.saturated < m.area &&
+						clippedLikeASpot(m) });
 		};
 		if (static_cast<std::int64_t>(m.area) < min_area) {
 			++st->dropped_small;
@@ -1067,10 +1229,24 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 				4.0 / (std::numbers::pi * std::numbers::pi);
 			b.cov_uu_px2 += kHalfEdgeShift * kHalfEdgeShift;
 			b.cov_vv_px2 += kHalfEdgeShift * kHalfEdgeShift;
+		} else if (look == Look::Peaks) {
+			/*
+			 * The level followed a plane through the ring round the peak;
+			 * where the surrounding bends, the background under the spot
+			 * may depart from the plane by as much as the ring does, across
+			 * the spot's own rms radius: a slope that tilts the weights
+			 * (correctBackgroundSlope()).
+			 */
+			const SpotMoments sm = spotMoments(m, b.u_px, b.v_px);
+			const double n_px = static_cast<double>(m.noisy) + m.saturated;
+			const double rms_radius =
+				std::sqrt((sm.mxx + sm.myy) / std::max(n_px, 1.0));
+			addSlopeVariance(sm, peak_misfit_ / std::max(rms_radius, 0.5), &b);
 		} else if (b.cov_uu_px2 > 0.0) {
 			correctBackgroundSlope(m, &b);
 		}
-		if (b.cov_uu_px2 > 0.0 && m.saturated == 0)
+		/* (Its model's background is the tiles'; a peak's is the plane round it.) */
+		if (b.cov_uu_px2 > 0.0 && m.saturated == 0 && look != Look::Peaks)
 			fitSmallSpot(image, std::max(noise * noise, kQuantisationVar), &b);
 		/*
 		 * A spot cut by the frame's edge lost an unknown part: its centroid
@@ -1090,6 +1266,7 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 			continue;
 		}
 		st->clipped_cores += look == Look::Cores ? 1 : 0;
+		st->inner_peaks += look == Look::Peaks ? 1 : 0;
 		if (!blobs->full()) {
 			blobs->push_back(b);
 			std::push_heap(blobs->begin(), blobs->end(), stronger);

@@ -133,6 +133,8 @@ struct BlobStats {
 	 * clipped but were dropped (an LED merged with a bright surrounding)
 	 */
 	int clipped_cores = 0;
+	/* detect(): spots round peaks inside dropped components (BlobDetector::lookForPeaks()) */
+	int inner_peaks = 0;
 	ThresholdStats threshold;
 };
 
@@ -199,7 +201,7 @@ private:
 	/*
 	 * The last labelling's components that pass the filter, into the heap
 	 * `blobs`. First: every one; the boxes of those dropped that clipped go
-	 * to merged_. Windows: every one. BelowTiles: only those whose peak lies
+	 * to dropped_. Windows: every one. BelowTiles: only those whose peak lies
 	 * below every tile level around them (none of their pixels reaches the
 	 * tiles' map), that stand out of their surroundings (standsOut()) and do
 	 * not reach `window`'s sides inside the frame. Cores: only those that do
@@ -210,11 +212,23 @@ private:
 		Windows, /* detectWindows(): the tiles' levels in a window */
 		BelowTiles, /* detect(): the steep tiles' cells, below the tiles' levels */
 		Cores, /* detect(): the clip level, in the box of a dropped component that clipped */
+		Peaks, /* detect(): a plane round a peak in a dropped component's box (lookForPeaks()) */
 	};
+	void lookForPeaks(const ImageView &image, const PixelWindow &box, BlobStats *st,
+			  StaticVector<Blob, kMaxCandidates> *blobs, int *peaks);
+	void peakAt(const ImageView &image, int x, int y, int v, BlobStats *st,
+		    StaticVector<Blob, kMaxCandidates> *blobs, int *peaks);
 	void collect(const ImageView &image, BlobStats *stats,
 		     StaticVector<Blob, kMaxCandidates> *blobs, Look look,
 		     const PixelWindow *window = nullptr);
 	void correctBackgroundSlope(const BlobMoments &m, Blob *b) const;
+	/* A component's weight W and the unweighted second moments of its pixels about (u, v). */
+	struct SpotMoments {
+		double w = 0.0, mxx = 0.0, myy = 0.0, mxy = 0.0;
+	};
+	static SpotMoments spotMoments(const BlobMoments &m, double u, double v);
+	/* The centroid's covariance from a background slope uncertain by sigma_slope (levels/px). */
+	static void addSlopeVariance(const SpotMoments &s, double sigma_slope, Blob *b);
 	static bool standsOut(const ImageView &image, const BlobMoments &m, int contrast);
 	static bool cutByWindow(const BlobMoments &m, const PixelWindow &window,
 				const ImageView &image);
@@ -228,8 +242,17 @@ private:
 	Impl *impl_;
 	/* Every pixel at the clip level: the third look's map. */
 	ThresholdMap clip_map_;
-	/* The first look's dropped components that clipped (their boxes): the third look's windows. */
-	StaticVector<PixelWindow, kMaxMergedCores> merged_;
+	/* Pixel by pixel: the fourth look's levels (lookForPeaks()), set in each window before it is labelled. */
+	ThresholdMap peak_map_;
+	int peak_x_ = 0, peak_y_ = 0; /* the peak lookForPeaks() labels round */
+	double peak_misfit_ = 0.0; /* its ring's rms departure from their plane, levels */
+	/* The first look's dropped components: the third and fourth looks' boxes. */
+	struct Dropped {
+		PixelWindow box;
+		bool clipped =
+			false; /* its clipped pixels, alone, are spot-shaped (clippedLikeASpot()) */
+	};
+	StaticVector<Dropped, kMaxDropped> dropped_;
 	/* The last successful detect(): its map is thresholder_.map(). */
 	bool reference_ = false;
 	ThresholdStats reference_threshold_;

@@ -18,11 +18,15 @@ inline constexpr std::size_t kMaxCandidates = 64;
 /* Connected components tracked while labelling one frame (before filtering). */
 inline constexpr std::size_t kMaxComponents = 16384;
 /*
- * Components of one frame dropped by the blob filter that clipped, whose
- * boxes are looked at again for clipped cores (an LED merged with a bright
- * surrounding); beyond these, the rest are not looked at.
+ * Components of one frame dropped by the blob filter whose boxes are looked at
+ * again for LEDs merged with a bright surrounding (clipped cores, peaks that
+ * stand out of the surrounding); beyond these, the rest are not looked at.
  */
-inline constexpr std::size_t kMaxMergedCores = 16;
+inline constexpr std::size_t kMaxDropped = 16;
+/* Peaks labelled round inside those boxes per frame (BlobDetector::lookForPeaks()). */
+inline constexpr std::size_t kMaxInnerPeaks = 64;
+/* The radius of the ring whose plane is a peak's background there, pixels. */
+inline constexpr int kPeakRingPx = 5;
 /* Largest frame the pipeline accepts, in pixels per side. */
 inline constexpr int kMaxFrameSide = 8192;
 

@@ -1058,10 +1058,71 @@ TEST(BlobClippedCores, AnLedMergedWithABrightPatchKeepsItsCore)
 	EXPECT_EQ(stats.clipped_cores, 0);
 	EXPECT_EQ(near_led().second, 1);
 
-	/* An LED that does not clip, merged with the patch: nothing to split, nothing added. */
+	/*
+	 * An LED that does not clip, merged with the patch: no core (the fourth
+	 * look, BlobInnerPeaks, finds it as a peak, within its covariance).
+	 */
 	StridedFrame dim(kSize, kSize, kSize);
 	paint(&dim, true, true, 90.0);
 	ASSERT_TRUE(det.detect(dim.view(), &blobs, &stats));
 	EXPECT_EQ(stats.clipped_cores, 0);
-	EXPECT_EQ(near_led().second, 0);
+	const auto [peak, peaks] = near_led();
+	ASSERT_EQ(peaks, 1);
+	EXPECT_EQ(stats.inner_peaks, 1);
+	EXPECT_LT(std::abs(peak->u_px - led_u), 3.0 * std::sqrt(peak->cov_uu_px2));
+	EXPECT_LT(std::abs(peak->v_px - led_v), 3.0 * std::sqrt(peak->cov_vv_px2));
+}
+
+/*
+ * An LED that does not clip, on a reflection too large for a spot (and
+ * above its tile's level): the first look drops the merged component, the
+ * fourth finds the LED as a peak above the plane of a ring round it, within
+ * the covariance it states. The reflection alone adds nothing.
+ */
+TEST(BlobInnerPeaks, AnLedOnABrightSlopedPatchIsFound)
+{
+	constexpr int kSize = 256;
+	const double led_u = 130.4, led_v = 125.7;
+	auto paint = [&](StridedFrame *f, bool led) {
+		std::mt19937 rng(17);
+		std::normal_distribution<double> noise(0.0, 2.0);
+		for (int y = 0; y < kSize; ++y)
+			for (int x = 0; x < kSize; ++x) {
+				double v = 20.0 + noise(rng);
+				/* The reflection: 140 x 140 px, 100 levels up, rising 0.5 level/px to the right. */
+				if (x >= 60 && x < 200 && y >= 60 && y < 200)
+					v += 100.0 + 0.5 * (x - 60);
+				if (led) {
+					const double d2 = (x - led_u) * (x - led_u) +
+							  (y - led_v) * (y - led_v);
+					v += 60.0 * std::exp(-d2 / (2.0 * 1.2 * 1.2));
+				}
+				f->at(x, y) = static_cast<std::uint8_t>(
+					std::clamp(std::lround(v), 0L, 255L));
+			}
+	};
+	BlobDetector det(kSize, kSize, ThresholdConfig{}, BlobFilterConfig{});
+	StaticVector<Blob, kMaxCandidates> blobs;
+	BlobStats stats;
+	StridedFrame with(kSize, kSize, kSize);
+	paint(&with, true);
+	ASSERT_TRUE(det.detect(with.view(), &blobs, &stats));
+	EXPECT_GE(stats.dropped_large, 1);
+	EXPECT_EQ(stats.inner_peaks, 1);
+	const Blob *led = nullptr;
+	for (const Blob &b : blobs)
+		if (std::hypot(b.u_px - led_u, b.v_px - led_v) < 2.0)
+			led = &b;
+	ASSERT_NE(led, nullptr);
+	EXPECT_LT(std::abs(led->u_px - led_u), 3.0 * std::sqrt(led->cov_uu_px2));
+	EXPECT_LT(std::abs(led->v_px - led_v), 3.0 * std::sqrt(led->cov_vv_px2));
+	EXPECT_LT(std::hypot(led->u_px - led_u, led->v_px - led_v), 0.2);
+
+	StridedFrame without(kSize, kSize, kSize);
+	paint(&without, false);
+	ASSERT_TRUE(det.detect(without.view(), &blobs, &stats));
+	EXPECT_EQ(stats.inner_peaks, 0);
+	for (const Blob &b : blobs)
+		EXPECT_FALSE(b.u_px > 60 && b.u_px < 200 && b.v_px > 60 && b.v_px < 200)
+			<< b.u_px << "," << b.v_px;
 }
