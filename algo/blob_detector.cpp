@@ -346,7 +346,8 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 			/* The level of every pixel of this tile row, and the lowest of each 64-byte block. */
 			const std::uint8_t *levels = map.cols() > 0 ? map.rowLevels(map_row)
 								    : &empty_level;
-			for (int c = 0; c < map_cols; ++c) {
+			/* From the window's first tile (a map of 1 px tiles has as many as the frame has columns). */
+			for (int c = std::min(wx0 / tile, map_cols - 1); c < map_cols; ++c) {
 				const int xa = std::max(c * tile, wx0);
 				if (xa >= wx1)
 					break;
