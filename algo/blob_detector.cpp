@@ -559,7 +559,7 @@ BlobDetector::BlobDetector(int max_width, int max_height, const ThresholdConfig 
 {
 	filter_.fill_gap_px = std::clamp(filter_.fill_gap_px, 0, kMaxFrameSide);
 	filter_.clip_level = std::clamp(filter_.clip_level, 1, 256);
-	/* (256: nothing clips, and no core is looked for: merged() needs a clipped pixel.) */
+	/* (256: nothing clips, and no core is looked for: Dropped::clipped needs a clipped pixel.) */
 	peak_map_ = ThresholdMap(thresholder_.maxWidth(), thresholder_.maxHeight(), 1);
 	clip_map_ =
 		ThresholdMap::uniform(static_cast<std::uint8_t>(std::min(filter_.clip_level, 255)));
@@ -980,8 +980,8 @@ const std::array<std::array<int, 2>, kPeakRing> &peakRing()
  * clip and stands the contrast above the median of a ring of radius
  * kPeakRingPx round it, where the ring departs from its plane (its median,
  * and the slopes of its opposite samples) by no more than the contrast: the
- * plane plus the contrast is the level, pixel by
- * pixel, of a labelling of the square window that the ring bounds; the
+ * plane plus the contrast is the level, pixel by pixel, of a labelling of
+ * the square window that the ring bounds (peakAt()); the
  * component holding the maximum is a new blob when it passes the filter,
  * stays inside the window and overlaps no blob found already. At most
  * kMaxInnerPeaks labellings per frame (*peaks counts them). Allocates: never.
