@@ -111,7 +111,10 @@ struct BlobFilterConfig {
 	int clip_level = 255;
 };
 
-/* The dropped counts cover both of detect()'s looks (the second: on steep tiles). */
+/*
+ * The dropped counts cover every look of detect() (the first, then on steep
+ * tiles, clipped cores and peaks inside dropped components).
+ */
 struct BlobStats {
 	int components = 0; /* connected components found (detect(): by its first look) */
 	int dropped_small = 0; /* specks, single pixels */
@@ -200,12 +203,14 @@ private:
 	const BlobMoments *components() const;
 	/*
 	 * The last labelling's components that pass the filter, into the heap
-	 * `blobs`. First: every one; the boxes of those dropped that clipped go
-	 * to dropped_. Windows: every one. BelowTiles: only those whose peak lies
-	 * below every tile level around them (none of their pixels reaches the
-	 * tiles' map), that stand out of their surroundings (standsOut()) and do
-	 * not reach `window`'s sides inside the frame. Cores: only those that do
-	 * not reach `window`'s sides inside the frame nor overlap a blob's box.
+	 * `blobs`. First: every one; the boxes of those dropped go to dropped_.
+	 * Windows: every one. BelowTiles: only those whose peak lies below every
+	 * tile level around them (none of their pixels reaches the tiles' map),
+	 * that stand out of their surroundings (standsOut()) and do not reach
+	 * `window`'s sides inside the frame. Cores: only those that do not reach
+	 * `window`'s sides inside the frame nor overlap a blob's box, and are
+	 * plateaus (solidCore()). Peaks: only the one holding (peak_x_, peak_y_),
+	 * if it does not reach `window`'s sides nor overlap a blob's box.
 	 */
 	enum class Look {
 		First, /* detect(): the tiles' levels */
@@ -249,8 +254,8 @@ private:
 	/* The first look's dropped components: the third and fourth looks' boxes. */
 	struct Dropped {
 		PixelWindow box;
-		bool clipped =
-			false; /* its clipped pixels, alone, are spot-shaped (clippedLikeASpot()) */
+		/* It clipped, and its clipped pixels, alone, are spot-shaped (clippedLikeASpot()). */
+		bool clipped = false;
 	};
 	StaticVector<Dropped, kMaxDropped> dropped_;
 	/* The last successful detect(): its map is thresholder_.map(). */
