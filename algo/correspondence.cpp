@@ -614,21 +614,42 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 			}
 		}
 		Hypothesis trial = *h;
-		trial.match.led_mask &= ~(1u << trial.match.pairs[worst][0]);
+		const auto dropped = trial.match.pairs[worst];
+		trial.match.led_mask &= ~(1u << dropped[0]);
 		for (std::size_t k = worst; k + 1 < trial.match.pairs.size(); ++k)
 			trial.match.pairs[k] = trial.match.pairs[k + 1];
 		trial.match.pairs.pop_back();
 		if (!refineMatched(pose, &trial, covariance))
 			break;
-		/* Re-match from the cleaner pose: the LED may find its own blob now. */
+		/*
+		 * Re-match from the cleaner pose: the LED may find its own blob now.
+		 * Not the blob it was dropped from: within the gate, the nearest
+		 * one comes straight back (an LED merged with a reflection, a spot
+		 * pulled off its LED), and the trial would only repeat the fit.
+		 */
 		Match again;
 		if (matchPredicted(trial.refined.pose, gatePx(trial.refined.pose), &again) >=
 		    min_matches) {
+			for (std::size_t k = 0; k < again.pairs.size(); ++k)
+				if (again.pairs[k] == dropped) {
+					again.led_mask &= ~(1u << dropped[0]);
+					for (std::size_t l = k; l + 1 < again.pairs.size(); ++l)
+						again.pairs[l] = again.pairs[l + 1];
+					again.pairs.pop_back();
+					break;
+				}
+		}
+		if (static_cast<int>(again.pairs.size()) >= min_matches) {
 			trial.match = again;
 			if (!refineMatched(trial.refined.pose, &trial, covariance))
 				break;
 		}
-		if (trial.refined.rms_px >= h->refined.rms_px)
+		/*
+		 * Better in pixels; and a fit that its centroids' covariance
+		 * explains keeps its LEDs (the drop is for an error too large).
+		 */
+		if (trial.refined.rms_px >= h->refined.rms_px ||
+		    (trial.match.pairs.size() < h->match.pairs.size() && errorExplained(*h, 1.0)))
 			break;
 		*h = trial;
 		pose = h->refined.pose;
