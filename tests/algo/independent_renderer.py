@@ -448,6 +448,8 @@ def main():
                                       "drawn": truth["leds_drawn"] if truth else 0,
                                       "range_mm": truth["range_mm"] if truth else 0,
                                       "led_px": truth["led_px"] if truth else [],
+                                      "truth_R": truth["R"].tolist() if truth else None,
+                                      "truth_t": truth["t"].tolist() if truth else None,
                                       "error": poseError(truth, rep, syms)
                                       if truth and rep["found"] else None,
                                       "correct": bool(truth and rep["found"] and
