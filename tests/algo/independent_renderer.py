@@ -247,15 +247,22 @@ def sensor(rng, img):
 
 
 def motionBlur(rng, img):
+    """A straight motion of 3-12 px during the exposure: the frame convolved with a line of that
+    length, sampled every 1/16 px and splatted bilinearly, so that the kernel is smooth and its
+    centroid is the kernel's centre (the truth is the pose at mid-exposure)."""
     length = rng.uniform(3, 12)
     ang = rng.uniform(0, math.pi)
-    size = int(math.ceil(length)) | 1
-    size += 2
+    half = int(math.ceil(0.5 * length)) + 1
+    size = 2 * half + 1
     k = np.zeros((size, size), np.float64)
-    c = size // 2
-    p0 = (int((c - 0.5 * length * math.cos(ang)) * 16), int((c - 0.5 * length * math.sin(ang)) * 16))
-    p1 = (int((c + 0.5 * length * math.cos(ang)) * 16), int((c + 0.5 * length * math.sin(ang)) * 16))
-    cv2.line(k, p0, p1, 1.0, 1, cv2.LINE_AA, 4)
+    for s in np.linspace(-0.5 * length, 0.5 * length, int(16 * length) + 1):
+        x, y = half + s * math.cos(ang), half + s * math.sin(ang)
+        x0, y0 = int(math.floor(x)), int(math.floor(y))
+        fx, fy = x - x0, y - y0
+        k[y0, x0] += (1 - fx) * (1 - fy)
+        k[y0, x0 + 1] += fx * (1 - fy)
+        k[y0 + 1, x0] += (1 - fx) * fy
+        k[y0 + 1, x0 + 1] += fx * fy
     k /= k.sum()
     return cv2.filter2D(img, -1, k, borderType=cv2.BORDER_REFLECT)
 
