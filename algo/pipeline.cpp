@@ -2,6 +2,9 @@
 #include "algo/pipeline.h"
 
 #include <cmath>
+#include <numbers>
+
+#include <Eigen/Eigenvalues>
 
 namespace dockpose {
 
@@ -22,6 +25,8 @@ const char *poseStatusName(PoseStatus status)
 		return "ambiguous";
 	case PoseStatus::RefineFailed:
 		return "error_too_large";
+	case PoseStatus::Imprecise:
+		return "imprecise";
 	}
 	return "unknown";
 }
@@ -59,6 +64,37 @@ PixelWindow boundingBox(const PixelWindow &a, const PixelWindow &b)
 }
 
 } /* namespace */
+
+/*
+ * PipelineConfig::max_rotation_error_deg and the translation's limit, against
+ * the 99 % bound of the pose's error along the worst axis of each block of its
+ * covariance ((tx, ty, tz) mm, (rx, ry, rz) rad).
+ */
+bool Pipeline::preciseEnough(const CorrespondenceResult &match) const
+{
+	/* sqrt of the 99 % point of chi^2 with 3 degrees of freedom (11.345). */
+	constexpr double kBound99 = 3.3682;
+	const Eigen::Matrix<double, 6, 6> &c = match.refined.covariance;
+	auto worst = [](const Eigen::Matrix3d &block) {
+		const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(block,
+									Eigen::EigenvaluesOnly);
+		return std::sqrt(std::max(es.eigenvalues().maxCoeff(), 0.0));
+	};
+	if (config_.max_rotation_error_deg > 0.0) {
+		const double bound_deg =
+			kBound99 * worst(c.block<3, 3>(3, 3)) * 180.0 / std::numbers::pi;
+		if (!(bound_deg <= config_.max_rotation_error_deg))
+			return false;
+	}
+	if (config_.max_translation_error_frac > 0.0) {
+		const double limit_mm = std::max(config_.min_translation_error_mm,
+						 config_.max_translation_error_frac *
+							 match.refined.pose.t_mm.norm());
+		if (!(kBound99 * worst(c.block<3, 3>(0, 0)) <= limit_mm))
+			return false;
+	}
+	return true;
+}
 
 void Pipeline::setFound(const CorrespondenceResult &match)
 {
@@ -189,6 +225,8 @@ bool Pipeline::processWindows(const ImageView &frame)
 	result_.hypotheses = match.hypotheses;
 	result_.verified = match.verified;
 	result_.windows = static_cast<int>(windows_.size());
+	if (!preciseEnough(match))
+		return false;
 	setFound(match);
 	return true;
 }
@@ -241,6 +279,11 @@ const PoseResult &Pipeline::process(const ImageView &frame)
 		result_.status = match.ambiguous	 ? PoseStatus::Ambiguous
 				 : match.error_too_large ? PoseStatus::RefineFailed
 							 : PoseStatus::NoMatch;
+		have_track_ = false;
+		return result_;
+	}
+	if (!preciseEnough(match)) {
+		result_.status = PoseStatus::Imprecise;
 		have_track_ = false;
 		return result_;
 	}

@@ -29,6 +29,7 @@ enum class PoseStatus : std::uint8_t {
 	NoMatch, /* no hypothesis passed verification */
 	Ambiguous, /* two different poses explain the image equally well */
 	RefineFailed, /* refinement diverged or left a large error */
+	Imprecise, /* the pose's own covariance puts its error beyond the precision required */
 };
 
 const char *poseStatusName(PoseStatus status);
@@ -84,6 +85,20 @@ struct PipelineConfig {
 	 */
 	int full_frame_every = 30;
 	double roi_margin_px = 6.0;
+	/*
+	 * The precision a reported pose must have: the 99 % bound of its error,
+	 * from its own covariance (3.37 sigma, the 99 % point of chi^2 with 3
+	 * degrees of freedom, along the worst axis of the rotation's and of the
+	 * translation's block), within max_rotation_error_deg (degrees) and
+	 * max(min_translation_error_mm, max_translation_error_frac x range).
+	 * A pose the image determines less well (far, few LEDs, blurred spots)
+	 * is refused as Imprecise: right or not, it could be off by more than the
+	 * arm may be told. Defaults: issue 8's bar for a correct pose.
+	 * max_rotation_error_deg 0, max_translation_error_frac 0: no such limit.
+	 */
+	double max_rotation_error_deg = 2.0;
+	double max_translation_error_frac = 0.02;
+	double min_translation_error_mm = 5.0;
 };
 
 class Pipeline
@@ -115,6 +130,7 @@ private:
 	/* The regions-of-interest pass of one tracked frame; false: read the whole frame. */
 	bool processWindows(const ImageView &frame);
 	void setFound(const CorrespondenceResult &match);
+	bool preciseEnough(const CorrespondenceResult &match) const;
 
 	TargetModel target_;
 	CameraModel camera_;

@@ -109,6 +109,11 @@ struct PipelineSection {
 	double max_log10_nfa = -4.0;
 	int min_leds_search = 4;
 	int min_leds_track = 4;
+	/* The precision a reported pose must have (PipelineConfig's, whose defaults these equal;
+	 * test_config checks): the 99 % bound of its error from its own covariance within
+	 * max_rotation_error_deg and max(5 mm, max_translation_error_frac x range); 0: no limit. */
+	double max_rotation_error_deg = 2.0;
+	double max_translation_error_frac = 0.02;
 	/* While tracking, every this many frames one is read whole; between, only
 	 * windows around the predicted LEDs (PipelineConfig::full_frame_every). */
 	int full_frame_every = 30;

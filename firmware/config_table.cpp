@@ -415,6 +415,21 @@ const Field<PipelineSection> kPipelineFields[] = {
 		 "stricter: fewer poses from weak evidence (one face, far, in clutter).",
 	  .range = { -40.0, -2.0 },
 	  .unit = "log10" },
+	{ .key = "max_rotation_error_deg",
+	  .kind = Kind::Number,
+	  .member = &PipelineSection::max_rotation_error_deg,
+	  .doc = "Precision a pose must have to be reported: the 99 % bound of its rotation error, "
+		 "from its own covariance, within this; a pose the image determines less well (far, "
+		 "few LEDs, blurred) is refused as imprecise. 0: no limit.",
+	  .range = { 0.0, 180.0 },
+	  .unit = "degrees" },
+	{ .key = "max_translation_error_frac",
+	  .kind = Kind::Number,
+	  .member = &PipelineSection::max_translation_error_frac,
+	  .doc = "The same for the translation: the 99 % bound of its error within max(5 mm, this "
+		 "x range). 0: no limit.",
+	  .range = { 0.0, 1.0 },
+	  .unit = "of range" },
 	{ .key = "min_leds_search",
 	  .kind = Kind::Integer,
 	  .member = &PipelineSection::min_leds_search,

@@ -47,6 +47,8 @@ PipelineConfig pipelineConfig(const PipelineSection &section)
 	config.correspondence.min_leds_search = section.min_leds_search;
 	config.correspondence.min_leds_track = section.min_leds_track;
 	config.full_frame_every = section.full_frame_every;
+	config.max_rotation_error_deg = section.max_rotation_error_deg;
+	config.max_translation_error_frac = section.max_translation_error_frac;
 	return config;
 }
 

@@ -251,3 +251,44 @@ TEST(EndToEndFailures, EmptyAndWrongSizedFramesGiveNoPose)
 	EXPECT_EQ(pipeline.last().status, PoseStatus::NoFrame);
 	EXPECT_FALSE(pipeline.process(ImageView{}).found);
 }
+
+/*
+ * A pose is reported only as precise as the arm may be told (PipelineConfig's
+ * max_rotation_error_deg and translation limits, against the 99 % bound from
+ * its own covariance): the wedge on the 512 px camera at 4 m is found, its
+ * rotation to a few tenths of a degree (sigma), and refused as Imprecise under
+ * a limit of 1 degree; without the limit the same frame gives that pose, and
+ * at 1 m the limit lets the pose through.
+ */
+TEST(EndToEndPrecision, APoseWhoseErrorBoundExceedsTheLimitIsRefused)
+{
+	const auto target = loadTargetModel(dataPath("wedge.json"));
+	const auto camera = loadCameraIntrinsics(dataPath("cam512.json"));
+	ASSERT_TRUE(target.isOk() && camera.isOk());
+	FrameRenderer renderer(target.value(), camera.value());
+	Image frame;
+	renderer.render(poseAt(camera.value(), target.value(), 4000.0, { 15.0, -20.0, 5.0 }, 0.5,
+			       0.5),
+			RenderOptions{}, 5, &frame);
+
+	PipelineConfig unlimited;
+	unlimited.max_rotation_error_deg = 0.0;
+	unlimited.max_translation_error_frac = 0.0;
+	unlimited.min_translation_error_mm = 0.0;
+	Pipeline open(target.value(), camera.value(), unlimited);
+	const PoseResult &r = open.process(frame.view());
+	ASSERT_TRUE(r.found) << poseStatusName(r.status);
+	EXPECT_GT(r.sigma_rpy_deg.maxCoeff(), 1.0 / 3.3682);
+
+	PipelineConfig one_degree;
+	one_degree.max_rotation_error_deg = 1.0;
+	Pipeline limited(target.value(), camera.value(), one_degree);
+	EXPECT_FALSE(limited.process(frame.view()).found);
+	EXPECT_EQ(limited.last().status, PoseStatus::Imprecise);
+	EXPECT_STREQ(poseStatusName(PoseStatus::Imprecise), "imprecise");
+
+	renderer.render(poseAt(camera.value(), target.value(), 1000.0, { 15.0, -20.0, 5.0 }, 0.5,
+			       0.5),
+			RenderOptions{}, 6, &frame);
+	EXPECT_TRUE(limited.process(frame.view()).found) << poseStatusName(limited.last().status);
+}

@@ -609,6 +609,8 @@ TEST_F(ConfigTest, DefaultsFillIn)
 	EXPECT_EQ(c.pipeline.min_leds_search, d.pipeline.min_leds_search);
 	EXPECT_EQ(c.pipeline.min_leds_track, d.pipeline.min_leds_track);
 	EXPECT_EQ(c.pipeline.full_frame_every, d.pipeline.full_frame_every);
+	EXPECT_EQ(c.pipeline.max_rotation_error_deg, d.pipeline.max_rotation_error_deg);
+	EXPECT_EQ(c.pipeline.max_translation_error_frac, d.pipeline.max_translation_error_frac);
 	EXPECT_EQ(c.pipeline.degraded_hold_frames, d.pipeline.degraded_hold_frames);
 	EXPECT_EQ(c.pipeline.lost_after_frames, d.pipeline.lost_after_frames);
 	EXPECT_EQ(c.systemd.notify, d.systemd.notify);
@@ -627,6 +629,9 @@ TEST(PipelineDefaults, EqualTheCorrespondences)
 	EXPECT_EQ(p.min_leds_search, c.min_leds_search);
 	EXPECT_EQ(p.min_leds_track, c.min_leds_track);
 	EXPECT_EQ(p.full_frame_every, dockpose::PipelineConfig{}.full_frame_every);
+	EXPECT_EQ(p.max_rotation_error_deg, dockpose::PipelineConfig{}.max_rotation_error_deg);
+	EXPECT_EQ(p.max_translation_error_frac,
+		  dockpose::PipelineConfig{}.max_translation_error_frac);
 }
 
 TEST_F(ConfigTest, ValuesAreRead)
