@@ -86,6 +86,15 @@ bool diagonalCross(const Eigen::Vector2d &p0, const Eigen::Vector2d &p1, const E
 	return true;
 }
 
+/* Remove match->pairs[k], and its LED's bit. */
+void removePair(Match *match, std::size_t k)
+{
+	match->led_mask &= ~(1u << match->pairs[k][0]);
+	for (std::size_t l = k; l + 1 < match->pairs.size(); ++l)
+		match->pairs[l] = match->pairs[l + 1];
+	match->pairs.pop_back();
+}
+
 /* log10 of the binomial coefficient C(n, k). */
 double log10Choose(int n, int k)
 {
@@ -615,10 +624,7 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 		}
 		Hypothesis trial = *h;
 		const auto dropped = trial.match.pairs[worst];
-		trial.match.led_mask &= ~(1u << dropped[0]);
-		for (std::size_t k = worst; k + 1 < trial.match.pairs.size(); ++k)
-			trial.match.pairs[k] = trial.match.pairs[k + 1];
-		trial.match.pairs.pop_back();
+		removePair(&trial.match, worst);
 		if (!refineMatched(pose, &trial, covariance))
 			break;
 		/*
@@ -632,10 +638,7 @@ bool Correspondence::refineMatch(const Pose &initial, double first_gate_px, int 
 		    min_matches) {
 			for (std::size_t k = 0; k < again.pairs.size(); ++k)
 				if (again.pairs[k] == dropped) {
-					again.led_mask &= ~(1u << dropped[0]);
-					for (std::size_t l = k; l + 1 < again.pairs.size(); ++l)
-						again.pairs[l] = again.pairs[l + 1];
-					again.pairs.pop_back();
+					removePair(&again, k);
 					break;
 				}
 		}
