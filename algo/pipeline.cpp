@@ -75,24 +75,27 @@ bool Pipeline::preciseEnough(const CorrespondenceResult &match) const
 	/* sqrt of the 99 % point of chi^2 with 3 degrees of freedom (11.345). */
 	constexpr double kBound99 = 3.3682;
 	const Eigen::Matrix<double, 6, 6> &c = match.refined.covariance;
-	auto worst = [](const Eigen::Matrix3d &block) {
+	/*
+	 * Is k sigma along the worst axis of the block within the limit? The
+	 * trace bounds the largest eigenvalue from above, so a pose well inside
+	 * (every tracked frame, mostly) needs no eigen-decomposition.
+	 */
+	auto within = [](const Eigen::Matrix3d &block, double limit) {
+		const double var_limit = limit * limit / (kBound99 * kBound99);
+		if (block.trace() <= var_limit)
+			return true;
 		const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(block,
 									Eigen::EigenvaluesOnly);
-		return std::sqrt(std::max(es.eigenvalues().maxCoeff(), 0.0));
+		return es.eigenvalues().maxCoeff() <= var_limit;
 	};
-	if (config_.max_rotation_error_deg > 0.0) {
-		const double bound_deg =
-			kBound99 * worst(c.block<3, 3>(3, 3)) * 180.0 / std::numbers::pi;
-		if (!(bound_deg <= config_.max_rotation_error_deg))
-			return false;
-	}
-	if (config_.max_translation_error_frac > 0.0) {
-		const double limit_mm = std::max(config_.min_translation_error_mm,
-						 config_.max_translation_error_frac *
-							 match.refined.pose.t_mm.norm());
-		if (!(kBound99 * worst(c.block<3, 3>(0, 0)) <= limit_mm))
-			return false;
-	}
+	if (config_.max_rotation_error_deg > 0.0 &&
+	    !within(c.block<3, 3>(3, 3), config_.max_rotation_error_deg * std::numbers::pi / 180.0))
+		return false;
+	if (config_.max_translation_error_frac > 0.0 &&
+	    !within(c.block<3, 3>(0, 0),
+		    std::max(config_.min_translation_error_mm,
+			     config_.max_translation_error_frac * match.refined.pose.t_mm.norm())))
+		return false;
 	return true;
 }
 
