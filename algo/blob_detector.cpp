@@ -99,6 +99,19 @@ constexpr double kQuantisationVar = 1.0 / 12.0;
 constexpr double kThresholdRingVar = 0.5;
 constexpr double kPlateauEdgeFraction2 = 4e-3;
 
+/*
+ * The measurement of a spot reaches below the level that detected it
+ * (hysteresis): down to kGrowSigma times the frame's noise over the
+ * background (at least kGrowMinContrast levels), where background noise
+ * alone passes one pixel in ~740. Only for components whose box is at most
+ * kGrowMaxBox on a side, grown within kGrowMargin of it (see grow()).
+ */
+constexpr double kGrowSigma = 3.0;
+constexpr int kGrowMinContrast = 2;
+constexpr int kGrowMaxBox = 32;
+constexpr int kGrowMargin = 16;
+constexpr int kGrowSide = kGrowMaxBox + 2 * kGrowMargin;
+
 struct Run {
 	int x0, x1; /* inclusive */
 	std::uint32_t label;
@@ -221,7 +234,9 @@ struct BlobDetector::Impl {
 		  runs_a(static_cast<std::size_t>(max_w) / 2 + 2),
 		  runs_b(static_cast<std::size_t>(max_w) / 2 + 2),
 		  level_row(static_cast<std::size_t>(max_w) + 64),
-		  block_level(static_cast<std::size_t>(max_w) / 64 + 1)
+		  block_level(static_cast<std::size_t>(max_w) / 64 + 1),
+		  grow_seen(static_cast<std::size_t>(kGrowSide) * kGrowSide),
+		  grow_stack(static_cast<std::size_t>(kGrowSide) * kGrowSide)
 	{
 	}
 
@@ -288,6 +303,9 @@ struct BlobDetector::Impl {
 	/* The level of every pixel of the current tile row; the lowest level of each 64-byte block. */
 	std::vector<std::uint8_t> level_row;
 	std::vector<U8x16> block_level;
+	/* grow(): the pixels of its window seen, and its flood's stack (x | y << 16). */
+	std::vector<std::uint8_t> grow_seen;
+	std::vector<std::uint32_t> grow_stack;
 	std::size_t labels = 0;
 	std::size_t components = 0;
 	bool overflow = false;
@@ -854,10 +872,146 @@ bool BlobDetector::detectWindows(const ImageView &image, const PixelWindow *wind
 				return false;
 			}
 		st->components += static_cast<int>(impl_->components);
-		collect(image, st, blobs, Look::Windows);
+		collect(image, st, blobs, Look::Windows, &w);
+		if (st->window_cut)
+			return false;
 	}
 	std::sort_heap(blobs->begin(), blobs->end(), stronger);
 	return true;
+}
+
+BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments &m, double noise,
+				      const PixelWindow *window, BlobMoments *out)
+{
+	const int low = std::max(kGrowMinContrast, static_cast<int>(std::ceil(kGrowSigma * noise)));
+	const int delta = thresholder_.contrast() - low;
+	if (delta <= 0 || m.saturated > 0 || m.x_max - m.x_min + 1 > kGrowMaxBox ||
+	    m.y_max - m.y_min + 1 > kGrowMaxBox)
+		return Grow::Kept;
+	const ThresholdMap &map = thresholder_.map();
+	/* The grown spot stays inside [x0, x1) x [y0, y1): the margin, the frame, the window. */
+	int x0 = std::max(0, m.x_min - kGrowMargin), y0 = std::max(0, m.y_min - kGrowMargin);
+	int x1 = std::min(image.width, m.x_max + 1 + kGrowMargin);
+	int y1 = std::min(image.height, m.y_max + 1 + kGrowMargin);
+	/* A side of the search area that is the window's, not the margin's nor the frame's. */
+	bool window_side[4] = { false, false, false, false };
+	if (window) {
+		window_side[0] = window->x0 > x0;
+		window_side[1] = window->x1 < x1;
+		window_side[2] = window->y0 > y0;
+		window_side[3] = window->y1 < y1;
+		x0 = std::max(x0, window->x0);
+		x1 = std::min(x1, window->x1);
+		y0 = std::max(y0, window->y0);
+		y1 = std::min(y1, window->y1);
+	}
+	const int side_x = x1 - x0;
+	auto lowLevel = [&](int x, int y) {
+		return std::max(0, map.levelAt(x, y) - delta);
+	};
+
+	/* The seed: the component's peak pixel (the first at its value, at or above its level). */
+	int seed_x = -1, seed_y = -1;
+	for (int y = m.y_min; y <= m.y_max && seed_x < 0; ++y) {
+		const std::uint8_t *row = image.row(y);
+		for (int x = m.x_min; x <= m.x_max; ++x)
+			if (row[x] == m.peak && row[x] >= map.levelAt(x, y)) {
+				seed_x = x;
+				seed_y = y;
+				break;
+			}
+	}
+	if (seed_x < 0)
+		return Grow::Kept;
+
+	std::uint8_t *seen = impl_->grow_seen.data();
+	std::fill_n(seen, static_cast<std::size_t>(side_x) * (y1 - y0), std::uint8_t{ 0 });
+	std::uint32_t *stack = impl_->grow_stack.data();
+	std::size_t top = 0;
+	auto index = [&](int x, int y) {
+		return static_cast<std::size_t>(y - y0) * side_x + static_cast<std::size_t>(x - x0);
+	};
+	seen[index(seed_x, seed_y)] = 1;
+	stack[top++] = static_cast<std::uint32_t>(seed_x) | static_cast<std::uint32_t>(seed_y)
+								    << 16;
+
+	BlobMoments g;
+	g.x_min = g.y_min = 0xffff;
+	std::uint32_t at_level = 0; /* grown pixels at or above the detecting level */
+	bool edge[4] = { false, false, false, false }; /* reached x0, x1 - 1, y0, y1 - 1 */
+	while (top > 0) {
+		const std::uint32_t p = stack[--top];
+		const int x = static_cast<int>(p & 0xffff), y = static_cast<int>(p >> 16);
+		const std::uint8_t v = image.row(y)[x];
+		const int t = lowLevel(x, y);
+		const std::uint64_t w = static_cast<std::uint64_t>(v - t + 1);
+		const std::uint64_t ux = static_cast<std::uint64_t>(x),
+				    uy = static_cast<std::uint64_t>(y);
+		++g.area;
+		g.sum_w += w;
+		g.sum_wx += w * ux;
+		g.sum_wy += w * uy;
+		g.sum_wxx += w * ux * ux;
+		g.sum_wyy += w * uy * uy;
+		g.sum_wxy += w * ux * uy;
+		++g.noisy;
+		g.sum_x += ux;
+		g.sum_y += uy;
+		g.sum_xx += ux * ux;
+		g.sum_yy += uy * uy;
+		g.sum_xy += ux * uy;
+		g.sum_t += static_cast<std::uint64_t>(t);
+		g.sum_tx += static_cast<std::uint64_t>(t) * ux;
+		g.sum_ty += static_cast<std::uint64_t>(t) * uy;
+		g.level_min = std::min<std::uint8_t>(g.level_min, static_cast<std::uint8_t>(t));
+		g.peak = std::max(g.peak, v);
+		g.x_min = std::min<std::uint16_t>(g.x_min, static_cast<std::uint16_t>(x));
+		g.x_max = std::max<std::uint16_t>(g.x_max, static_cast<std::uint16_t>(x));
+		g.y_min = std::min<std::uint16_t>(g.y_min, static_cast<std::uint16_t>(y));
+		g.y_max = std::max<std::uint16_t>(g.y_max, static_cast<std::uint16_t>(y));
+		at_level += v >= map.levelAt(x, y) ? 1U : 0U;
+		edge[0] = edge[0] || x == x0;
+		edge[1] = edge[1] || x == x1 - 1;
+		edge[2] = edge[2] || y == y0;
+		edge[3] = edge[3] || y == y1 - 1;
+		for (int dy = -1; dy <= 1; ++dy) {
+			const int ny = y + dy;
+			if (ny < y0 || ny >= y1)
+				continue;
+			const std::uint8_t *row = image.row(ny);
+			for (int dx = -1; dx <= 1; ++dx) {
+				const int nx = x + dx;
+				if (nx < x0 || nx >= x1 || seen[index(nx, ny)])
+					continue;
+				seen[index(nx, ny)] = 1;
+				if (row[nx] >= lowLevel(nx, ny))
+					stack[top++] = static_cast<std::uint32_t>(nx) |
+						       static_cast<std::uint32_t>(ny) << 16;
+			}
+		}
+	}
+	/* A window's side reached inside the frame: the spot may go on beyond it. */
+	for (int i = 0; i < 4; ++i)
+		if (edge[i] && window_side[i])
+			return Grow::Cut;
+	/*
+	 * Kept as it was: a spot that reaches its margin (it stands on a
+	 * brighter surrounding, not on the background), or that does not hold
+	 * the whole component (its gaps filled by the labeller fall below the
+	 * low level). One that holds other components at the detecting level
+	 * is one spot the noise broke up at that level (a blurred streak):
+	 * each of them grows into the same spot, which collect() keeps once.
+	 */
+	const bool margin_x0 = x0 > 0 && !window_side[0],
+		   margin_x1 = x1 < image.width && !window_side[1];
+	const bool margin_y0 = y0 > 0 && !window_side[2],
+		   margin_y1 = y1 < image.height && !window_side[3];
+	if ((edge[0] && margin_x0) || (edge[1] && margin_x1) || (edge[2] && margin_y0) ||
+	    (edge[3] && margin_y1) || g.x_min > m.x_min || g.x_max < m.x_max || g.y_min > m.y_min ||
+	    g.y_max < m.y_max)
+		return Grow::Kept;
+	*out = g;
+	return Grow::Grown;
 }
 
 /*
@@ -1178,6 +1332,13 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 	const std::int64_t min_area = filter_.min_area_px;
 
 	const double noise = st->threshold.noise_sigma;
+	/* The spots grown so far: one that several components grow into is kept once. */
+	struct GrownKey {
+		std::uint32_t area;
+		std::uint64_t sum_w;
+		std::uint16_t x_min, y_min;
+	};
+	StaticVector<GrownKey, 2 * kMaxCandidates> grown_keys;
 	/* Keep the strongest kMaxCandidates in a heap whose top is the weakest. */
 	const BlobMoments *comps = impl_->acc.data();
 	const std::size_t n = impl_->components;
@@ -1218,7 +1379,36 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 			merged();
 			continue;
 		}
-		Blob b = measure(m, noise);
+		/* The spot's measurement reaches below the detecting level (grow()). */
+		BlobMoments grown;
+		const BlobMoments *spot = &m;
+		if (look == Look::First || look == Look::Windows) {
+			const Grow g = grow(image, m, noise,
+					    look == Look::Windows ? window : nullptr, &grown);
+			if (g == Grow::Cut) {
+				st->window_cut = true;
+				return;
+			}
+			if (g == Grow::Grown) {
+				const GrownKey key{ grown.area, grown.sum_w, grown.x_min,
+						    grown.y_min };
+				const bool seen = std::any_of(grown_keys.begin(), grown_keys.end(),
+							      [&](const GrownKey &k) {
+								      return k.area == key.area &&
+									     k.sum_w == key.sum_w &&
+									     k.x_min == key.x_min &&
+									     k.y_min == key.y_min;
+							      });
+				if (seen)
+					continue;
+				if (!grown_keys.full()) {
+					grown_keys.push_back(key);
+					spot = &grown;
+				}
+			}
+		}
+		const BlobMoments &ms = *spot;
+		Blob b = measure(ms, noise);
 		if (look == Look::Cores) {
 			/*
 			 * The core's centroid is its clipped plateau's; a brighter
@@ -1238,13 +1428,13 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 			 * the spot's own rms radius: a slope that tilts the weights
 			 * (correctBackgroundSlope()).
 			 */
-			const SpotMoments sm = spotMoments(m, b.u_px, b.v_px);
-			const double n_px = static_cast<double>(m.noisy) + m.saturated;
+			const SpotMoments sm = spotMoments(ms, b.u_px, b.v_px);
+			const double n_px = static_cast<double>(ms.noisy) + ms.saturated;
 			const double rms_radius =
 				std::sqrt((sm.mxx + sm.myy) / std::max(n_px, 1.0));
 			addSlopeVariance(sm, peak_misfit_ / std::max(rms_radius, 0.5), &b);
 		} else if (b.cov_uu_px2 > 0.0) {
-			correctBackgroundSlope(m, &b);
+			correctBackgroundSlope(ms, &b);
 		}
 		/* (Its model's background is the tiles'; a peak's is the plane round it.) */
 		if (b.cov_uu_px2 > 0.0 && m.saturated == 0 && look != Look::Peaks)
@@ -1253,12 +1443,12 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 		 * A spot cut by the frame's edge lost an unknown part: its centroid
 		 * may be off by up to half its visible extent along that axis.
 		 */
-		if (b.cov_uu_px2 > 0.0 && (m.x_min == 0 || m.x_max == image.width - 1)) {
-			const double half = 0.5 * (m.x_max - m.x_min + 1);
+		if (b.cov_uu_px2 > 0.0 && (ms.x_min == 0 || ms.x_max == image.width - 1)) {
+			const double half = 0.5 * (ms.x_max - ms.x_min + 1);
 			b.cov_uu_px2 += half * half;
 		}
-		if (b.cov_vv_px2 > 0.0 && (m.y_min == 0 || m.y_max == image.height - 1)) {
-			const double half = 0.5 * (m.y_max - m.y_min + 1);
+		if (b.cov_vv_px2 > 0.0 && (ms.y_min == 0 || ms.y_max == image.height - 1)) {
+			const double half = 0.5 * (ms.y_max - ms.y_min + 1);
 			b.cov_vv_px2 += half * half;
 		}
 		if (b.elongation > filter_.max_elongation || b.fill < filter_.min_fill) {

@@ -227,6 +227,26 @@ private:
 		     StaticVector<Blob, kMaxCandidates> *blobs, Look look,
 		     const PixelWindow *window = nullptr);
 	void correctBackgroundSlope(const BlobMoments &m, Blob *b) const;
+	/*
+	 * Hysteresis: the spot whose core the component `m` (of the tiles'
+	 * levels, unsaturated, its box small) is, measured down to a lower level
+	 * -- 3 sigma of the frame's noise `noise` over the background -- from
+	 * its peak pixel, 8-connected, within a margin of its box (and inside
+	 * `window`, when given). A faint spot drawn out by motion blur shows
+	 * only the few pixels the noise lifts above the detecting level, whose
+	 * centroid then lies anywhere along it: its moments over the whole
+	 * spot put it back, and the covariance follows (docs/vision.md). Grown:
+	 * *out holds them. Kept: none (the component reaches its margin, takes
+	 * in another component, or is not such a spot). Cut: it reaches a side
+	 * of `window` inside the frame. Allocates: never.
+	 */
+	enum class Grow {
+		Kept,
+		Grown,
+		Cut
+	};
+	Grow grow(const ImageView &image, const BlobMoments &m, double noise,
+		  const PixelWindow *window, BlobMoments *out);
 	/* A component's weight W and the unweighted second moments of its pixels about (u, v). */
 	struct SpotMoments {
 		double w = 0.0, mxx = 0.0, myy = 0.0, mxy = 0.0;

@@ -934,6 +934,80 @@ TEST(BlobSteepBackground, AFaintSpotAtTheFootOfABrightPatchIsFound)
 }
 
 /*
+ * A faint spot drawn out by motion blur into a streak whose plateau lies
+ * near the detecting level shows only the pixels that the noise lifts above
+ * it, often in two or three pieces, whose centroids lie anywhere along the
+ * streak (1-2 px off, where their covariance says 0.1 px). Measured down to
+ * 3 sigma over the background from its pieces (BlobDetector::grow()), each
+ * streak is one blob on its LED's mid-exposure place, within its own sigma.
+ */
+TEST(BlobGrow, AFaintBlurredStreakIsOneBlobOnItsMiddle)
+{
+	constexpr int kSize = 256;
+	constexpr double kNoise = 3.5, kBackground = 9.0, kLength = 11.0, kPsf = 1.0;
+	/* 16 vertical streaks at sub-pixel places; the plateau 6.5 sigma over the background. */
+	std::vector<Eigen::Vector2d> truth;
+	for (int j = 0; j < 4; ++j)
+		for (int i = 0; i < 4; ++i)
+			truth.emplace_back(32.0 + 60.0 * i + 0.13 * (i + 4 * j),
+					   32.0 + 60.0 * j + 0.29 * (i + 4 * j));
+	const double plateau = 7.5 * kNoise;
+	std::mt19937 rng(2027);
+	std::normal_distribution<double> noise(0.0, kNoise);
+	StridedFrame f(kSize, kSize, kSize);
+	for (int y = 0; y < kSize; ++y)
+		for (int x = 0; x < kSize; ++x) {
+			double v = kBackground + noise(rng);
+			for (const Eigen::Vector2d &c : truth) {
+				if (std::abs(x - c.x()) > 6.0 || std::abs(y - c.y()) > 12.0)
+					continue;
+				/* A Gaussian across, a segment of kLength blurred by the PSF along. */
+				const double across =
+					std::exp(-0.5 * (x - c.x()) * (x - c.x()) / (kPsf * kPsf));
+				const double z0 =
+					(y - c.y() + 0.5 * kLength) / (std::numbers::sqrt2 * kPsf);
+				const double z1 =
+					(y - c.y() - 0.5 * kLength) / (std::numbers::sqrt2 * kPsf);
+				v += plateau * across * 0.5 * (std::erf(z0) - std::erf(z1));
+			}
+			f.at(x, y) =
+				static_cast<std::uint8_t>(std::clamp(std::lround(v), 0L, 255L));
+		}
+	BlobDetector det(kSize, kSize, ThresholdConfig{}, BlobFilterConfig{});
+	StaticVector<Blob, kMaxCandidates> blobs;
+	BlobStats stats;
+	ASSERT_TRUE(det.detect(f.view(), &blobs, &stats));
+	/* The pieces at the detecting level: more than one per streak in this frame. */
+	int pieces = 0;
+	ASSERT_TRUE(det.label(f.view(), det.thresholder().map(),
+			      [&](const BlobMoments &m) { pieces += m.area >= 2 ? 1 : 0; }));
+	EXPECT_GT(pieces, static_cast<int>(truth.size()) + 4);
+
+	double z2_sum = 0.0;
+	int z_count = 0;
+	for (const Eigen::Vector2d &c : truth) {
+		int near = 0;
+		for (const Blob &b : blobs) {
+			if (std::abs(b.u_px - c.x()) > 3.0 ||
+			    std::abs(b.v_px - c.y()) > 0.5 * kLength + 2.0)
+				continue;
+			++near;
+			const double dv = b.v_px - c.y();
+			EXPECT_LT(std::abs(dv), 0.6) << "streak at " << c.transpose();
+			EXPECT_LT(std::abs(b.u_px - c.x()), 0.3) << "streak at " << c.transpose();
+			ASSERT_GT(b.cov_vv_px2, 0.0);
+			z2_sum += dv * dv / b.cov_vv_px2;
+			++z_count;
+		}
+		EXPECT_EQ(near, 1) << "streak at " << c.transpose();
+	}
+	/* Along the streak, error / sigma about 1: its mean square within 0.3 .. 3 over 16. */
+	ASSERT_GT(z_count, 0);
+	EXPECT_LT(z2_sum / z_count, 3.0);
+	EXPECT_GT(z2_sum / z_count, 0.3);
+}
+
+/*
  * The second look's labelling may overflow (more components in the steep
  * tiles than it holds) where the first look's did not: the frame keeps what
  * the first look found, and says that the second look was cut short.
