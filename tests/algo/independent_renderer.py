@@ -380,6 +380,46 @@ def poseError(truth, report, syms):
     return best
 
 
+def rotationLog(r):
+    """The rotation vector of r (radians)."""
+    cos_ang = max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0))
+    ang = math.acos(cos_ang)
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    if ang < 1e-9:
+        return 0.5 * w
+    return w * (ang / (2.0 * math.sin(ang)))
+
+
+def normalisedError(truth, report, syms):
+    """The reported pose's error against the truth (its nearest symmetric equivalent), as dockpose's
+    covariance parametrises it -- (tx, ty, tz) mm, then the rotation r (rad) with R_true =
+    exp([r]x) R -- divided by its sigmas, and its NEES e^T C^-1 e. None without a covariance."""
+    if "covariance" not in report:
+        return None
+    cov = np.array(report["covariance"], dtype=np.float64)
+    r_rep = quatToR(report["q_wxyz"])
+    t_rep = np.array(report["t_mm"])
+    best = None
+    for rs, ts in syms:
+        r = r_rep @ rs
+        t = r_rep @ ts + t_rep
+        e = np.concatenate([truth["t"] - t, rotationLog(truth["R"] @ r.T)])
+        # The equivalent's translation moves with the rotation: t' = R ts + t.
+        a = r_rep @ ts
+        jac = np.eye(6)
+        jac[0:3, 3:6] = -np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+        c = jac @ cov @ jac.T
+        if best is None or np.linalg.norm(e[3:]) < np.linalg.norm(best[0][3:]):
+            best = (e, c)
+    e, c = best
+    try:
+        nees = float(e @ np.linalg.solve(c, e))
+    except np.linalg.LinAlgError:
+        return None
+    z = [float(e[i] / math.sqrt(c[i, i])) if c[i, i] > 0 else float("nan") for i in range(6)]
+    return z, nees
+
+
 def withinBar(truth, error):
     """Within 2 degrees and max(5 mm, 2 % of range) of the truth (issue 8's bar)."""
     rot_deg, t_mm = error
@@ -413,6 +453,7 @@ def main():
     stats = {}
     wrong = []
     free_poses = []
+    z_all, nees_all = [], []  # over the correct poses: error / sigma per axis, NEES
     for tname, target in targets.items():
         tpath = os.path.join(out, tname + ".json")
         with open(tpath, "w") as f:
@@ -452,6 +493,10 @@ def main():
                 key = (tname, category)
                 error = poseError(truth, rep, syms) if truth and rep["found"] else None
                 correct = error is not None and withinBar(truth, error)
+                normalised = normalisedError(truth, rep, syms) if correct else None
+                if normalised is not None:
+                    z_all.append(normalised[0])
+                    nees_all.append(normalised[1])
                 log.write(json.dumps({"image": path, "category": category, "status": rep["status"],
                                       "blobs": rep.get("blobs"), "leds": rep.get("leds"),
                                       "drawn": truth["leds_drawn"] if truth else 0,
@@ -459,7 +504,9 @@ def main():
                                       "led_px": truth["led_px"] if truth else [],
                                       "truth_R": truth["R"].tolist() if truth else None,
                                       "truth_t": truth["t"].tolist() if truth else None,
-                                      "error": error, "correct": correct}) + "\n")
+                                      "error": error, "correct": correct,
+                                      "z": normalised[0] if normalised else None,
+                                      "nees": normalised[1] if normalised else None}) + "\n")
                 s = stats.setdefault(key, {"frames": 0, "found": 0, "wrong": 0, "ge5": 0,
                                            "ge5_found": 0})
                 s["frames"] += 1
@@ -502,6 +549,14 @@ def main():
           "wrong: %d" % (total, found, 100.0 * found / max(total, 1), ge5_found, ge5,
                          100.0 * ge5_found / max(ge5, 1), len(wrong)))
     print("target-free: %d frames, %d with a pose" % (n_free, len(free_poses)))
+    if z_all:
+        # chi^2(6)'s 95 % point: 12.592.
+        z = np.array(z_all)
+        nees = np.array(nees_all)
+        print("correct poses: %d; std of error/sigma (tx ty tz rx ry rz): %s; NEES mean %.2f "
+              "(chi2(6): 6), median %.2f (5.35), above the 95 %% point %.1f %% (5 %%)"
+              % (len(nees), " ".join("%.2f" % v for v in np.nanstd(z, axis=0)), nees.mean(),
+                 float(np.median(nees)), 100.0 * float(np.mean(nees > 12.592))))
     for w in wrong:
         print("WRONG: %s range %.0f mm, error %.2f deg %.1f mm, rotation sigma %.2f deg (worst "
               "axis), %s LEDs, log10 NFA %s" % (w[0], w[1], w[2][0], w[2][1], w[3], w[4], w[5]))
