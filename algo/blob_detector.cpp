@@ -112,6 +112,12 @@ constexpr int kGrowMaxBox = 32;
 constexpr int kGrowMargin = 16;
 constexpr int kGrowSide = kGrowMaxBox + 2 * kGrowMargin;
 
+/* The grown spot's level over the background, levels, for a frame of noise sigma `noise`. */
+int growContrast(double noise)
+{
+	return std::max(kGrowMinContrast, static_cast<int>(std::ceil(kGrowSigma * noise)));
+}
+
 struct Run {
 	int x0, x1; /* inclusive */
 	std::uint32_t label;
@@ -164,7 +170,7 @@ bool gaussianPeak3(const double s[3], double *d, double grad[3])
  * with the smaller covariance let the choice follow the noise and the
  * sub-pixel phase, and the locking came back). Allocates: never.
  */
-void fitSmallSpot(const ImageView &image, double s2, Blob *b)
+void fitSmallSpot(const ImageView &image, double s2, double gain, Blob *b)
 {
 	const int cx = static_cast<int>(std::lround(b->u_px));
 	const int cy = static_cast<int>(std::lround(b->v_px));
@@ -190,11 +196,13 @@ void fitSmallSpot(const ImageView &image, double s2, Blob *b)
 	const double background = 0.5 * (static_cast<double>(lower) + upper);
 
 	double sx[3] = { 0.0, 0.0, 0.0 }, sy[3] = { 0.0, 0.0, 0.0 };
+	double var[3][3]; /* each core pixel's: s2 and its shot noise */
 	for (int j = -1; j <= 1; ++j)
 		for (int i = -1; i <= 1; ++i) {
 			const double v = static_cast<double>(image.at(cx + i, cy + j)) - background;
 			sx[i + 1] += v;
 			sy[j + 1] += v;
+			var[j + 1][i + 1] = s2 + gain * std::max(0.0, v);
 		}
 	for (int k = 0; k < 3; ++k)
 		if (!(sx[k] > 0.0) || !(sy[k] > 0.0))
@@ -204,18 +212,23 @@ void fitSmallSpot(const ImageView &image, double s2, Blob *b)
 		return;
 
 	/*
-	 * Pixel (i, j) of the core enters sx[i] and sy[j], each marginal holds
-	 * 3 pixels and 3 times the background. The median of n samples has the
+	 * Pixel (i, j) of the core enters sx[i] and sy[j] with its variance,
+	 * s2 and its shot noise gain * (v - background) (ThresholdStats::
+	 * noise_gain); each marginal holds 3 pixels and 3 times the background. The median of n samples has the
 	 * variance pi / 2 s2 / n (at least the rounding of one level).
 	 */
 	const double gxs = gx[0] + gx[1] + gx[2], gys = gy[0] + gy[1] + gy[2];
 	const double var_bg =
 		std::max(0.5 * std::numbers::pi * s2 / kFitRingPixels, kQuantisationVar);
-	const double cuu = 3.0 * s2 * (gx[0] * gx[0] + gx[1] * gx[1] + gx[2] * gx[2]) +
-			   9.0 * var_bg * gxs * gxs;
-	const double cvv = 3.0 * s2 * (gy[0] * gy[0] + gy[1] * gy[1] + gy[2] * gy[2]) +
-			   9.0 * var_bg * gys * gys;
-	const double cuv = s2 * gxs * gys + 9.0 * var_bg * gxs * gys;
+	double cuu = 9.0 * var_bg * gxs * gxs;
+	double cvv = 9.0 * var_bg * gys * gys;
+	double cuv = 9.0 * var_bg * gxs * gys;
+	for (int j = 0; j < 3; ++j)
+		for (int i = 0; i < 3; ++i) {
+			cuu += var[j][i] * gx[i] * gx[i];
+			cvv += var[j][i] * gy[j] * gy[j];
+			cuv += var[j][i] * gx[i] * gy[j];
+		}
 	b->u_px = cx + dx;
 	b->v_px = cy + dy;
 	b->cov_uu_px2 = cuu;
@@ -609,7 +622,8 @@ const BlobMoments *BlobDetector::components() const
 	return impl_->acc.data();
 }
 
-Blob BlobDetector::measure(const BlobMoments &m, double noise_sigma)
+Blob BlobDetector::measure(const BlobMoments &m, double noise_sigma, double noise_gain,
+			   double level_over_background)
 {
 	__extension__ using Int128 = __int128;
 
@@ -685,11 +699,12 @@ Blob BlobDetector::measure(const BlobMoments &m, double noise_sigma)
 	b.fill = b.area_px / (std::numbers::pi * 4.0 * b.sigma_major_px * b.sigma_minor_px);
 	b.saturated_px = static_cast<int>(m.saturated);
 	if (noise_sigma >= 0.0)
-		centroidCovariance(m, noise_sigma, &b);
+		centroidCovariance(m, noise_sigma, noise_gain, level_over_background, &b);
 	return b;
 }
 
-void BlobDetector::centroidCovariance(const BlobMoments &m, double noise_sigma, Blob *b)
+void BlobDetector::centroidCovariance(const BlobMoments &m, double noise_sigma, double noise_gain,
+				      double level_over_background, Blob *b)
 {
 	__extension__ using Int128 = __int128;
 
@@ -725,6 +740,61 @@ void BlobDetector::centroidCovariance(const BlobMoments &m, double noise_sigma, 
 	b->cov_uu_px2 = k * sxx;
 	b->cov_vv_px2 = k * syy;
 	b->cov_uv_px2 = k * sxy;
+
+	/*
+	 * Shot noise: a pixel's variance grows by g (v - B) = g (w - 1 + c)
+	 * over the background's (c: the level's height over it), so var(u)
+	 * gains g (sum w (x - u)^2 + (c - 1) sum (x - u)^2) / W^2 over the
+	 * noisy pixels. sum w (x - u)^2 from the weighted moments (exact in
+	 * integers about their own centroid, shifted to u), less the clipped
+	 * pixels' share at the clip weight.
+	 */
+	if (noise_gain > 0.0 && m.sum_w > 0) {
+		const Int128 w = static_cast<Int128>(m.sum_w);
+		const double dw = static_cast<double>(m.sum_w);
+		const double ux = static_cast<double>(m.sum_wx) / dw - b->u_px;
+		const double uy = static_cast<double>(m.sum_wy) / dw - b->v_px;
+		double wxx = static_cast<double>(w * static_cast<Int128>(m.sum_wxx) -
+						 static_cast<Int128>(m.sum_wx) *
+							 static_cast<Int128>(m.sum_wx)) /
+				     dw +
+			     dw * ux * ux;
+		double wyy = static_cast<double>(w * static_cast<Int128>(m.sum_wyy) -
+						 static_cast<Int128>(m.sum_wy) *
+							 static_cast<Int128>(m.sum_wy)) /
+				     dw +
+			     dw * uy * uy;
+		double wxy = static_cast<double>(w * static_cast<Int128>(m.sum_wxy) -
+						 static_cast<Int128>(m.sum_wx) *
+							 static_cast<Int128>(m.sum_wy)) /
+				     dw +
+			     dw * ux * uy;
+		if (m.saturated > 0) {
+			const double ns = static_cast<double>(m.saturated);
+			const double clip_w = static_cast<double>(m.peak) -
+					      static_cast<double>(m.level_min) + 1.0;
+			const double mx = static_cast<double>(m.sat_x) / ns - b->u_px;
+			const double my = static_cast<double>(m.sat_y) / ns - b->v_px;
+			const double sx = static_cast<double>(m.sat_x);
+			const double sy = static_cast<double>(m.sat_y);
+			wxx -= clip_w *
+			       ((static_cast<double>(m.sat_xx) - sx * sx / ns) + ns * mx * mx);
+			wyy -= clip_w *
+			       ((static_cast<double>(m.sat_yy) - sy * sy / ns) + ns * my * my);
+			wxy -= clip_w *
+			       ((static_cast<double>(m.sat_xy) - sx * sy / ns) + ns * mx * my);
+		}
+		const double c1 = level_over_background - 1.0;
+		const double kg = noise_gain / (sw * sw);
+		const double gxx = std::max(0.0, wxx + c1 * sxx);
+		const double gyy = std::max(0.0, wyy + c1 * syy);
+		/* (A sum of variances times an outer product: positive semi-definite.) */
+		const double lim = std::sqrt(gxx * gyy);
+		const double gxy = std::clamp(wxy + c1 * sxy, -lim, lim);
+		b->cov_uu_px2 += kg * gxx;
+		b->cov_vv_px2 += kg * gyy;
+		b->cov_uv_px2 += kg * gxy;
+	}
 
 	/*
 	 * Pixel locking, isotropic. For a disc of radius R the ring of one pixel
@@ -883,7 +953,7 @@ bool BlobDetector::detectWindows(const ImageView &image, const PixelWindow *wind
 BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments &m, double noise,
 				      const PixelWindow *window, BlobMoments *out)
 {
-	const int low = std::max(kGrowMinContrast, static_cast<int>(std::ceil(kGrowSigma * noise)));
+	const int low = growContrast(noise);
 	const int delta = thresholder_.contrast() - low;
 	if (delta <= 0 || m.saturated > 0 || m.x_max - m.x_min + 1 > kGrowMaxBox ||
 	    m.y_max - m.y_min + 1 > kGrowMaxBox)
@@ -1332,6 +1402,7 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 	const std::int64_t min_area = filter_.min_area_px;
 
 	const double noise = st->threshold.noise_sigma;
+	const double gain = st->threshold.noise_gain;
 	/* The spots grown so far: one that several components grow into is kept once. */
 	struct GrownKey {
 		std::uint32_t area;
@@ -1408,7 +1479,8 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 			}
 		}
 		const BlobMoments &ms = *spot;
-		Blob b = measure(ms, noise);
+		Blob b = measure(ms, noise, gain,
+				 spot == &grown ? growContrast(noise) : thresholder_.contrast());
 		if (look == Look::Cores) {
 			/*
 			 * The core's centroid is its clipped plateau's; a brighter
@@ -1438,7 +1510,7 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 		}
 		/* (Its model's background is the tiles'; a peak's is the plane round it.) */
 		if (b.cov_uu_px2 > 0.0 && m.saturated == 0 && look != Look::Peaks)
-			fitSmallSpot(image, std::max(noise * noise, kQuantisationVar), &b);
+			fitSmallSpot(image, std::max(noise * noise, kQuantisationVar), gain, &b);
 		/*
 		 * A spot cut by the frame's edge lost an unknown part: its centroid
 		 * may be off by up to half its visible extent along that axis.

@@ -189,14 +189,20 @@ public:
 	/*
 	 * From raw moments to a Blob (centroid, axes, fill). With the frame's
 	 * pixel noise (levels, >= 0; ThresholdStats::noise_sigma) also the
-	 * centroid's covariance; without (< 0) it stays 0 (unknown).
+	 * centroid's covariance; without (< 0) it stays 0 (unknown). Its shot
+	 * noise: noise_gain (ThresholdStats::noise_gain, levels^2 per level) and
+	 * the segmenting level's height over the background (levels; 0 when
+	 * unknown, e.g. a fixed level): a pixel of weight w = v - T + 1 has the
+	 * variance noise_sigma^2 + noise_gain (w - 1 + level_over_background).
 	 * Allocates: never.
 	 */
-	static Blob measure(const BlobMoments &m, double noise_sigma = -1.0);
+	static Blob measure(const BlobMoments &m, double noise_sigma = -1.0,
+			    double noise_gain = 0.0, double level_over_background = 0.0);
 
 private:
 	struct Impl;
-	static void centroidCovariance(const BlobMoments &m, double noise_sigma, Blob *b);
+	static void centroidCovariance(const BlobMoments &m, double noise_sigma, double noise_gain,
+				       double level_over_background, Blob *b);
 	/* Label into the component list of impl_ (componentCount() entries). */
 	bool labelImpl(const ImageView &image, const ThresholdMap &map);
 	std::size_t componentCount() const;

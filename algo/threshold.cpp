@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <numbers>
 
 namespace dockpose {
 
@@ -176,6 +177,7 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 		st->valid = true;
 		sampleNoise(image);
 		st->noise_sigma = noiseSigma().toDouble();
+		st->noise_gain = noiseGain();
 		return map_;
 	}
 
@@ -185,6 +187,61 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 	cols_ = st->tiles_x;
 	rows_ = st->tiles_y;
 	return map_;
+}
+
+void Thresholder::sampleGain(const ImageView &image, int cols, int rows)
+{
+	gain_hist_.fill(0);
+	gain_level_sum_.fill(0);
+	/*
+	 * Pairs (x, x + 1) at the tiles' sample points, and at more points
+	 * beside each, 2 px apart, until the frame has about kGainPairs; each
+	 * goes to the band of its tile's median (its background: a pair's own
+	 * value would cut its noise to the band).
+	 */
+	const int tile = tile_px_;
+	const int step = step_px_;
+	std::int64_t points = 0;
+	for (int c = 0; c < cols; ++c)
+		points += col_count_[static_cast<std::size_t>(c)];
+	std::int64_t sample_rows = 0;
+	for (int r = 0; r < rows; ++r)
+		sample_rows += row_count_[static_cast<std::size_t>(r)];
+	points *= sample_rows;
+	const int per_point = static_cast<int>(std::clamp<std::int64_t>(
+		(kGainPairs + points - 1) / std::max<std::int64_t>(points, 1), 1, step / 2));
+	for (int r = 0; r < rows; ++r) {
+		for (int j = 0; j < row_count_[static_cast<std::size_t>(r)]; ++j) {
+			const int y = row_start_[static_cast<std::size_t>(r)] + j * step;
+			const std::uint8_t *p = image.row(y);
+			for (int c = 0; c < cols; ++c) {
+				const int median = medians_[static_cast<std::size_t>(r) * cols + c];
+				const std::size_t band =
+					static_cast<std::size_t>(median) / kGainBandLevels;
+				std::uint32_t *h = gain_hist_.data() + band * kGainDiffs;
+				const int x_end = std::min(image.width, (c + 1) * tile);
+				std::uint32_t n = 0;
+				for (int i = 0; i < col_count_[static_cast<std::size_t>(c)]; ++i) {
+					const int x0 =
+						col_start_[static_cast<std::size_t>(c)] + i * step;
+					for (int e = 0; e < per_point; ++e) {
+						const int x = x0 + 2 * e;
+						if (x + 1 >= x_end)
+							break;
+						const int d = static_cast<int>(p[x + 1]) -
+							      static_cast<int>(p[x]);
+						const int ad = d < 0 ? -d : d;
+						++h[static_cast<std::size_t>(
+							ad < static_cast<int>(kGainDiffs)
+								? ad
+								: kGainDiffs - 1)];
+						++n;
+					}
+				}
+				gain_level_sum_[band] += static_cast<std::uint32_t>(median) * n;
+			}
+		}
+	}
 }
 
 void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
@@ -236,11 +293,13 @@ void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
 				if (noise_row) {
 					/* pairs (x, x + 1): x + 1 is inside the same full tile */
 					for (int c = 0; c < full; ++c) {
+						const int v0 = q[c * tile_stride];
 						const int d =
 							static_cast<int>(q[c * tile_stride + 1]) -
-							static_cast<int>(q[c * tile_stride]);
+							v0;
+						const int ad = d < 0 ? -d : d;
 						++dh[static_cast<std::size_t>(c & 3) * 256 +
-						     static_cast<std::size_t>(d < 0 ? -d : d)];
+						     static_cast<std::size_t>(ad)];
 					}
 				}
 			}
@@ -307,6 +366,8 @@ void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
 
 void Thresholder::sampleNoise(const ImageView &image)
 {
+	gain_hist_.fill(0);
+	gain_level_sum_.fill(0); /* no tiles, no background: no gain (noiseGain() 0) */
 	for (auto &bank : diff_hist_)
 		bank.fill(0);
 	const int step = step_px_;
@@ -365,6 +426,89 @@ UQ16_16 Thresholder::noiseSigma() const
 	return UQ16_16(255);
 }
 
+double Thresholder::noiseGain() const
+{
+	/*
+	 * Photon transfer within the frame: per band of kGainBandLevels levels
+	 * of the tiles' backgrounds with at least kGainMinPairs pairs, the pixel
+	 * variance from the median |d| (interpolated as in noiseSigma(); spots'
+	 * edges are outliers there too) against the band's mean level; a
+	 * straight line through them, each weighted by the inverse of its
+	 * variance's own variance (a MAD-based variance of n Gaussian pairs:
+	 * ~kMadVarOfVar var^2 / n). The slope is the gain when it stands out of
+	 * its standard error (kGainSignificance times it, that error scaled up
+	 * by the fit's reduced chi^2 when the bands scatter more than that):
+	 * a frame whose backgrounds span too little, or carry no shot noise,
+	 * gives 0 instead of its noise.
+	 */
+	constexpr double kMadVarOfVar = 5.4;
+	constexpr double kGainSignificance = 2.0;
+	std::array<double, kGainBands> lv{}, vr{}, wt{};
+	int bands = 0;
+	double level_lo = 256.0, level_hi = -1.0;
+	for (std::size_t b = 0; b < kGainBands; ++b) {
+		const std::uint32_t *h = gain_hist_.data() + b * kGainDiffs;
+		std::uint64_t n = 0;
+		for (std::size_t d = 0; d < kGainDiffs; ++d)
+			n += h[d];
+		if (n < kGainMinPairs)
+			continue;
+		std::uint64_t below = 0;
+		double mad = static_cast<double>(kGainDiffs);
+		for (std::size_t d = 0; d < kGainDiffs; ++d) {
+			if (2 * (below + h[d]) >= n && h[d] > 0) {
+				const double lo = d == 0 ? 0.0 : static_cast<double>(d) - 0.5;
+				const double width = d == 0 ? 0.5 : 1.0;
+				mad = lo + width * static_cast<double>(n - 2 * below) /
+						   (2.0 * static_cast<double>(h[d]));
+				break;
+			}
+			below += h[d];
+		}
+		if (mad >= static_cast<double>(kGainDiffs) - 1.0)
+			continue; /* not a background's band: mostly edges */
+		const double sigma = 1.4826 * mad / std::numbers::sqrt2;
+		const double var = std::max(sigma * sigma, 1.0 / 12.0);
+		const double level =
+			static_cast<double>(gain_level_sum_[b]) / static_cast<double>(n);
+		/* Levels clipped at 0 or 255 within two sigma: their spread is cut. */
+		if (level < 2.0 * sigma || level > 255.0 - 2.0 * sigma)
+			continue;
+		lv[static_cast<std::size_t>(bands)] = level;
+		vr[static_cast<std::size_t>(bands)] = var;
+		wt[static_cast<std::size_t>(bands)] =
+			static_cast<double>(n) / (kMadVarOfVar * var * var);
+		++bands;
+		level_lo = std::min(level_lo, level);
+		level_hi = std::max(level_hi, level);
+	}
+	if (bands < kGainMinBands || level_hi - level_lo < kGainMinSpanLevels)
+		return 0.0;
+	double sw = 0.0, swx = 0.0, swy = 0.0, swxx = 0.0, swxy = 0.0;
+	for (std::size_t i = 0; i < static_cast<std::size_t>(bands); ++i) {
+		sw += wt[i];
+		swx += wt[i] * lv[i];
+		swy += wt[i] * vr[i];
+		swxx += wt[i] * lv[i] * lv[i];
+		swxy += wt[i] * lv[i] * vr[i];
+	}
+	const double det = sw * swxx - swx * swx;
+	if (!(det > 0.0))
+		return 0.0;
+	const double slope = (sw * swxy - swx * swy) / det;
+	const double offset = (swy - slope * swx) / sw;
+	double chi2 = 0.0;
+	for (std::size_t i = 0; i < static_cast<std::size_t>(bands); ++i) {
+		const double r = vr[i] - offset - slope * lv[i];
+		chi2 += wt[i] * r * r;
+	}
+	const double reduced = bands > 2 ? chi2 / (bands - 2) : 1.0;
+	const double slope_se = std::sqrt(sw / det * std::max(1.0, reduced));
+	if (!(slope > kGainSignificance * slope_se))
+		return 0.0;
+	return std::min(slope, kGainMax);
+}
+
 void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
 {
 	const int width = image.width;
@@ -383,6 +527,7 @@ void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
 				&row_start_[r], &row_count_[r]);
 
 	sampleTiles(image, cols, rows);
+	sampleGain(image, cols, rows);
 
 	const UQ16_16 sigma = noiseSigma();
 	const UQ16_16 contrast = std::max(fixedMul<UQ16_16>(k_sigma_, sigma), min_contrast_);
@@ -496,6 +641,7 @@ void Thresholder::computeAuto(const ImageView &image, ThresholdStats *stats)
 	stats->level_max = level_max;
 	stats->background = static_cast<double>(background_sum) / static_cast<double>(cols * rows);
 	stats->noise_sigma = sigma.toDouble();
+	stats->noise_gain = noiseGain();
 	stats->tiles_x = cols;
 	stats->tiles_y = rows;
 	stats->valid = true;

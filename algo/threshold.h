@@ -23,7 +23,10 @@
  *    median is interpolated within its histogram bin, so noise below one
  *    level is still measured (pixel quantisation adds 1/12 level^2).
  *    Fixed mode measures it too, from pairs on the same sample grid (the
- *    blobs' centroid covariance needs it).
+ *    blobs' centroid covariance needs it);
+ *  - noise_gain (Auto only): the sensor's shot noise, levels^2 of variance
+ *    per level, from the noise against the level of the tiles' backgrounds
+ *    (photon transfer within the frame, noiseGain(); docs/vision.md).
  *
  * The arithmetic on levels is fixed point (algo/fixed_point.h). The sample
  * reads about 1/sample_step_px^2 of the pixels (1/256 by default: 16
@@ -72,6 +75,14 @@ struct ThresholdStats {
 	int level_max = 0;
 	double background = 0.0; /* mean of the tile backgrounds, levels (Auto only, else 0) */
 	double noise_sigma = 0.0; /* robust noise estimate, levels (both modes) */
+	/*
+	 * Shot noise: the pixel variance grows by this many levels^2 per level
+	 * of signal, var(v) = noise_sigma^2 + noise_gain * (v - background)
+	 * (the sensor's levels per electron), fitted to the noise against the
+	 * level over the frame's own sample (Thresholder::noiseGain()); 0 when
+	 * the sample's levels span too little to show it (both modes).
+	 */
+	double noise_gain = 0.0;
 	int tiles_x = 0; /* the tile grid */
 	int tiles_y = 0;
 	bool valid = false; /* false: invalid view or frame larger than the Thresholder's */
@@ -216,6 +227,27 @@ private:
 	void sampleNoise(const ImageView &image);
 	/* Robust noise sigma from the difference histogram, levels. */
 	UQ16_16 noiseSigma() const;
+	/* ThresholdStats::noise_gain from gain_hist_, levels^2 per level. */
+	double noiseGain() const;
+	/* The pairs of noiseGain(), after sampleTiles() (its medians). Allocates: never. */
+	void sampleGain(const ImageView &image, int cols, int rows);
+	/*
+	 * The noise against the level (sampleGain()): about kGainPairs pairs, by
+	 * band of kGainBandLevels levels of their tile's median and by
+	 * |difference| (up to kGainDiffs - 1); a band counts with kGainMinPairs
+	 * pairs, the fit with kGainMinBands bands spanning kGainMinSpanLevels
+	 * levels; the gain is at most kGainMax.
+	 */
+	static constexpr std::size_t kGainBandLevels = 4;
+	static constexpr std::int64_t kGainPairs = 8192;
+	static constexpr std::size_t kGainBands = 256 / kGainBandLevels;
+	static constexpr std::size_t kGainDiffs = 64;
+	static constexpr std::uint64_t kGainMinPairs = 48;
+	static constexpr int kGainMinBands = 2;
+	static constexpr double kGainMinSpanLevels = 4.0;
+	static constexpr double kGainMax = 4.0;
+	std::array<std::uint32_t, kGainBands * kGainDiffs> gain_hist_{};
+	std::array<std::uint32_t, kGainBands> gain_level_sum_{};
 
 	ThresholdConfig config_;
 	int max_width_ = 0;

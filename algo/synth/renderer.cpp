@@ -1043,6 +1043,14 @@ void accumulateTile(const FrameState &f, int tx0, int ty0, int tw, int th, doubl
 	}
 }
 
+/* The noise of a pixel whose noise-free level is v: read noise and shot noise. */
+double pixelSigma(const RenderOptions &o, double v)
+{
+	if (o.shot_gain <= 0.0)
+		return o.noise_sigma;
+	return std::sqrt(o.noise_sigma * o.noise_sigma + o.shot_gain * std::max(v, 0.0));
+}
+
 /*
  * Quantise one tile row (pixels tx0 .. tx0 + tw - 1 of row y, levels acc_row
  * above background bg_row) with the fast read noise: four uniforms per pixel.
@@ -1060,8 +1068,8 @@ void quantiseRowFastNoise(const FrameState &f, std::uint64_t noise_key, const do
 				   2.0;
 		/* Four uniforms in (0, 1): mean 2, variance 1/3. */
 		const double z = (sum * 0x1.0p-16 - 2.0) * kSqrt3;
-		const double v = bg_row + f.gscale * (x - f.mid_x) * f.gdx + acc_row[i] +
-				 f.options.noise_sigma * z;
+		const double clean = bg_row + f.gscale * (x - f.mid_x) * f.gdx + acc_row[i];
+		const double v = clean + pixelSigma(f.options, clean) * z;
 		row[x] = static_cast<std::uint8_t>(std::clamp(std::floor(v + 0.5), 0.0, 255.0));
 	}
 }
@@ -1075,7 +1083,7 @@ void quantiseRowFastNoise(const FrameState &f, std::uint64_t noise_key, const do
 void quantiseRowGaussianNoise(const FrameState &f, std::uint64_t noise_key, const double *acc_row,
 			      int tx0, int tw, int y, double bg_row, std::uint8_t *row)
 {
-	const bool noisy = f.options.noise_sigma > 0.0;
+	const bool noisy = f.options.noise_sigma > 0.0 || f.options.shot_gain > 0.0;
 	const std::uint64_t pairs_per_row = (static_cast<std::uint64_t>(f.width) + 1) / 2;
 	for (int i = 0; i < tw; i += 2) {
 		const int x = tx0 + i;
@@ -1094,7 +1102,7 @@ void quantiseRowGaussianNoise(const FrameState &f, std::uint64_t noise_key, cons
 		for (int q = 0; q < 2 && i + q < tw; ++q) {
 			double v = bg_row + f.gscale * (x + q - f.mid_x) * f.gdx + acc_row[i + q];
 			if (noisy)
-				v += f.options.noise_sigma * (q ? z_odd : z_even);
+				v += pixelSigma(f.options, v) * (q ? z_odd : z_even);
 			row[x + q] = static_cast<std::uint8_t>(
 				std::clamp(std::floor(v + 0.5), 0.0, 255.0));
 		}
@@ -1109,7 +1117,8 @@ void quantiseTile(const FrameState &f, std::uint64_t noise_key, const double *ac
 		  int tw, int th, Image *out)
 {
 	const RenderOptions &options = f.options;
-	const bool fast_noise = options.noise_sigma > 0.0 && options.fast_noise;
+	const bool fast_noise = (options.noise_sigma > 0.0 || options.shot_gain > 0.0) &&
+				options.fast_noise;
 	for (int j = 0; j < th; ++j) {
 		const int y = ty0 + j;
 		std::uint8_t *row = out->data() + static_cast<std::size_t>(y) * f.width;

@@ -53,6 +53,12 @@ struct RenderOptions {
 	 * at 3.5 sigma); a different pattern from the default Box-Muller noise.
 	 */
 	bool fast_noise = false;
+	/*
+	 * Shot noise, levels per electron: a pixel whose noise-free level is v
+	 * gets the variance noise_sigma^2 + shot_gain * v (Poisson, in its
+	 * Gaussian approximation; 0: read noise only).
+	 */
+	double shot_gain = 0.0;
 
 	/* Clutter. */
 	int hot_pixels = 0; /* single saturated pixels */

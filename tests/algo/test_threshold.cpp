@@ -526,3 +526,52 @@ TEST(Threshold, CellsFollowASteepFlank)
 			}
 	}
 }
+
+/*
+ * The sensor's gain from the frame's own noise against its level
+ * (ThresholdStats::noise_gain): a background ramp with shot noise gives its
+ * levels per electron; read noise alone, on a flat background or on a
+ * gradient, gives 0 (a slope within twice its error is no gain); nothing is
+ * claimed from a fixed level's frame (no backgrounds).
+ */
+TEST(Threshold, NoiseGainFromTheFrame)
+{
+	struct Case {
+		int width, height;
+		double gain, read_sigma, level_lo, level_hi;
+	};
+	for (const Case c :
+	     { Case{ kW, kH, 0.5, 1.5, 8.0, 60.0 }, Case{ kW, kH, 1.0, 2.5, 5.0, 35.0 },
+	       Case{ 512, 512, 0.25, 1.0, 10.0, 50.0 }, Case{ 640, 480, 0.0, 2.0, 10.0, 40.0 },
+	       Case{ kW, kH, 0.0, 3.0, 20.0, 20.0 } }) {
+		std::mt19937 rng(
+			static_cast<std::uint32_t>(c.width + 1000 * c.gain + 10 * c.read_sigma));
+		std::normal_distribution<double> unit(0.0, 1.0);
+		Frame f{ c.width, c.height, c.width, {} };
+		f.bytes.resize(static_cast<std::size_t>(c.width) * c.height);
+		for (int y = 0; y < c.height; ++y)
+			for (int x = 0; x < c.width; ++x) {
+				const double level = c.level_lo + (c.level_hi - c.level_lo) *
+									  (x + y) /
+									  (c.width + c.height);
+				const double v = level + std::sqrt(c.read_sigma * c.read_sigma +
+								   c.gain * level) *
+								 unit(rng);
+				f.bytes[static_cast<std::size_t>(y) * c.width + x] =
+					static_cast<std::uint8_t>(
+						std::clamp(std::lround(v), 0L, 255L));
+			}
+		Thresholder th(c.width, c.height, ThresholdConfig{});
+		ThresholdStats stats;
+		th.compute(f.view(), &stats);
+		if (c.gain > 0.0)
+			EXPECT_NEAR(stats.noise_gain, c.gain, 0.25 * c.gain)
+				<< c.width << " px, gain " << c.gain;
+		else
+			EXPECT_EQ(stats.noise_gain, 0.0) << c.width << " px, read noise only";
+		Thresholder fixed(c.width, c.height,
+				  ThresholdConfig{ .mode = ThresholdMode::Fixed });
+		fixed.compute(f.view(), &stats);
+		EXPECT_EQ(stats.noise_gain, 0.0);
+	}
+}

@@ -101,7 +101,8 @@ Dots findDots(BlobDetector *detector, const ImageView &image, const GridSpec &gr
 		if (static_cast<int>(m.area) < std::max(shape.min_area_px, 3) ||
 		    m.area > max_area_px)
 			return;
-		const Blob b = BlobDetector::measure(m, threshold.noise_sigma);
+		const Blob b = BlobDetector::measure(m, threshold.noise_sigma, threshold.noise_gain,
+						     detector->thresholder().contrast());
 		if (b.elongation > shape.max_elongation || b.fill < shape.min_fill)
 			return;
 		const float size = static_cast<float>(2.0 * std::sqrt(b.area_px / M_PI));
