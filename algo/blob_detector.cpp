@@ -976,7 +976,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		y1 = std::min(y1, window->y1);
 	}
 	const int side_x = x1 - x0;
-	auto lowLevel = [&](int x, int y) {
+	auto low_level = [&](int x, int y) {
 		return std::max(0, map.levelAt(x, y) - delta);
 	};
 
@@ -1013,8 +1013,9 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		const std::uint32_t p = stack[--top];
 		const int x = static_cast<int>(p & 0xffff), y = static_cast<int>(p >> 16);
 		const std::uint8_t v = image.row(y)[x];
-		const int t = lowLevel(x, y);
-		const std::uint64_t w = static_cast<std::uint64_t>(v - t + 1);
+		const int t = low_level(x, y);
+		const std::uint64_t w =
+			static_cast<std::uint64_t>(v) + 1U - static_cast<std::uint64_t>(t);
 		const std::uint64_t ux = static_cast<std::uint64_t>(x),
 				    uy = static_cast<std::uint64_t>(y);
 		++g.area;
@@ -1054,7 +1055,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 				if (nx < x0 || nx >= x1 || seen[index(nx, ny)])
 					continue;
 				seen[index(nx, ny)] = 1;
-				if (row[nx] >= lowLevel(nx, ny))
+				if (row[nx] >= low_level(nx, ny))
 					stack[top++] = static_cast<std::uint32_t>(nx) |
 						       static_cast<std::uint32_t>(ny) << 16;
 			}
