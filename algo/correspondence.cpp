@@ -814,6 +814,22 @@ double Correspondence::chi2Bound(int points)
 	return dof * std::pow(1.0 - c + 3.09 * std::sqrt(c), 3.0);
 }
 
+/*
+ * A fit accepted on max_rms_px whose chi2 lies beyond its 99.9 % point has
+ * residuals its centroids' covariance does not explain: its own covariance
+ * is scaled by what the residuals say (chi2 / dof, the Birge ratio), so that
+ * the precision limit and the reported sigmas see that error too. Within
+ * the point it is left as propagated (a right fit's chi2 / dof scatters
+ * about 1).
+ */
+void Correspondence::scaleUnexplained(int points, RefineResult *refined)
+{
+	if (!(refined->chi2 > chi2Bound(points)))
+		return;
+	const double dof = std::max(2.0 * static_cast<double>(points) - 6.0, 1.0);
+	refined->covariance *= refined->chi2 / dof;
+}
+
 /* The residuals are what the centroids' covariance predicts (chi2 within its 99.9 % point, x slack^2). */
 bool Correspondence::fitStatistical(const Hypothesis &h, double slack) const
 {
@@ -1771,6 +1787,7 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 		return false;
 	result->refined = chosen.refined;
 	result->match = chosen.match;
+	scaleUnexplained(static_cast<int>(chosen.match.pairs.size()), &result->refined);
 	return true;
 }
 
@@ -1861,6 +1878,7 @@ bool Correspondence::solve(const StaticVector<Blob, kMaxCandidates> &blobs, cons
 			result->tracked = true;
 			result->refined = h.refined;
 			result->match = h.match;
+			scaleUnexplained(static_cast<int>(h.match.pairs.size()), &result->refined);
 			result->log10_nfa = h.log10_nfa;
 			result->verified = 1;
 			return true;

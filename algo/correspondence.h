@@ -140,6 +140,12 @@ struct CorrespondenceResult {
 		false; /* the best match left a reprojection error above max_rms_px */
 	bool tracked = false;
 	bool budget_exhausted = false; /* the search stopped at max_hypotheses */
+	/*
+	 * The accepted fit. Its covariance is the centroids' propagated, scaled
+	 * by chi2 / dof when the fit was accepted on max_rms_px with chi2 beyond
+	 * its 99.9 % point (the residuals say more error than the centroids'
+	 * covariance: a spot merged with a reflection, an unmodelled lens).
+	 */
 	RefineResult refined;
 	Match match;
 	double log10_nfa = 0.0; /* of the accepted pose (or of the best rejected one) */
@@ -238,6 +244,8 @@ private:
 	bool rival(const Hypothesis &other, const Hypothesis &chosen) const;
 	bool errorExplained(const Hypothesis &hypothesis, double slack) const;
 	static double chi2Bound(int points);
+	/* CorrespondenceResult::refined's covariance scaling, for a fit of `points` LEDs. */
+	static void scaleUnexplained(int points, RefineResult *refined);
 	bool fitStatistical(const Hypothesis &hypothesis, double slack) const;
 	bool earlyExit(const Hypothesis &hypothesis);
 	std::uint64_t nearTarget(const Hypothesis &hypothesis) const;

@@ -6,6 +6,7 @@
  * reported pose, and that nothing is reported when the image cannot say.
  */
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 
@@ -629,4 +630,75 @@ TEST(Correspondence, ASpotPulledOffItsLedIsLeftOutNotMatchedAgain)
 	for (const auto &pair : r.match.pairs)
 		EXPECT_NE(pair[1], pulled);
 	expectPose(truth, r.refined.pose, 0.1, 0.5);
+}
+
+TEST(Correspondence, AFitAcceptedOnItsPixelErrorCarriesTheErrorItShows)
+{
+	/*
+	 * One LED's spot merged with a reflection 0.8 px off, its covariance
+	 * (0.03 px) that of a bright spot: the fit is accepted on max_rms_px
+	 * though its chi2 lies far beyond its 99.9 % point. Its covariance must
+	 * say the error the residuals show (scaled by chi2 / dof), not the
+	 * centroids' alone: on the independent renderer's frames such a pose,
+	 * rotated 3.2 deg, carried a sigma of 0.12 deg and passed the precision
+	 * limit. A fit within its point keeps the propagated covariance.
+	 */
+	const CameraModel cam(cam1456());
+	const TargetModel m = corner();
+	const Pose truth = makePose(10, -15, 5, 20, -10, 1400);
+	std::mt19937 rng(3);
+	const auto clean = observe(m, cam, truth, 0, 0, 0.0, rng);
+	ASSERT_EQ(clean.size(), m.points_mm.size());
+	auto pulled = clean;
+	for (Blob &b : pulled)
+		b.cov_uu_px2 = b.cov_vv_px2 = 0.03 * 0.03;
+	auto exact = pulled;
+	pulled[2].u_px += 0.6;
+	pulled[2].v_px -= 0.5;
+
+	Correspondence c(m, cam, {});
+	CorrespondenceResult r;
+	ASSERT_TRUE(c.solve(pulled, nullptr, &r)) << "error too large: " << r.error_too_large;
+	ASSERT_EQ(r.match.pairs.size(), m.points_mm.size());
+	const int n = static_cast<int>(r.match.pairs.size());
+	const double dof = 2.0 * n - 6.0;
+	ASSERT_GT(r.refined.chi2, 3.0 * dof);
+	ASSERT_LT(r.refined.rms_px, CorrespondenceConfig{}.max_rms_px);
+
+	/* The same match refined alone: the centroids' covariance, unscaled. */
+	std::array<Eigen::Vector3d, kMaxLeds> model;
+	std::array<Eigen::Vector2d, kMaxLeds> px;
+	std::array<Eigen::Matrix2d, kMaxLeds> cov;
+	for (int i = 0; i < n; ++i) {
+		const auto &pair = r.match.pairs[static_cast<std::size_t>(i)];
+		const Blob &b = pulled[static_cast<std::size_t>(pair[1])];
+		model[static_cast<std::size_t>(i)] = m.points_mm[static_cast<std::size_t>(pair[0])];
+		px[static_cast<std::size_t>(i)] = { b.u_px, b.v_px };
+		cov[static_cast<std::size_t>(i)] << b.cov_uu_px2, b.cov_uv_px2, b.cov_uv_px2,
+			b.cov_vv_px2;
+	}
+	RefineOptions o;
+	o.led_sigma_mm = m.led_sigma_mm;
+	RefineResult alone;
+	ASSERT_TRUE(
+		refinePose(cam, model.data(), px.data(), n, r.refined.pose, o, &alone, cov.data()));
+	for (int k = 0; k < 6; ++k)
+		EXPECT_NEAR(r.refined.covariance(k, k) / alone.covariance(k, k),
+			    r.refined.chi2 / dof, 0.02 * r.refined.chi2 / dof)
+			<< "axis " << k;
+
+	/* The exact spots: chi2 within its point, the covariance as propagated. */
+	ASSERT_TRUE(c.solve(exact, nullptr, &r));
+	ASSERT_LT(r.refined.chi2, dof);
+	RefineResult exact_alone;
+	for (int i = 0; i < n; ++i) {
+		const auto &pair = r.match.pairs[static_cast<std::size_t>(i)];
+		const Blob &b = exact[static_cast<std::size_t>(pair[1])];
+		px[static_cast<std::size_t>(i)] = { b.u_px, b.v_px };
+		model[static_cast<std::size_t>(i)] = m.points_mm[static_cast<std::size_t>(pair[0])];
+	}
+	ASSERT_TRUE(refinePose(cam, model.data(), px.data(), n, r.refined.pose, o, &exact_alone,
+			       cov.data()));
+	EXPECT_NEAR(r.refined.covariance(0, 0), exact_alone.covariance(0, 0),
+		    1e-6 * exact_alone.covariance(0, 0));
 }
