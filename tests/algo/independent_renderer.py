@@ -363,15 +363,21 @@ def writePgm(path, img):
         f.write(img.tobytes())
 
 
+def equivalents(report, syms):
+    """The reported pose's equivalents under the target's symmetries (rs, ts): for each, its
+    rotation and translation (R rs, R ts + t) and R ts (how far its translation moves with R)."""
+    r_rep = quatToR(report["q_wxyz"])
+    t_rep = np.array(report["t_mm"])
+    for rs, ts in syms:
+        a = r_rep @ ts
+        yield r_rep @ rs, a + t_rep, a
+
+
 def poseError(truth, report, syms):
     """Rotation (degrees) and translation (mm) error of a reported pose, the smallest over the
     target's symmetries (the rotation's, and the translation of that same equivalent)."""
-    r_rep = quatToR(report["q_wxyz"])
-    t_rep = np.array(report["t_mm"])
     best = None
-    for rs, ts in syms:
-        r = r_rep @ rs
-        t = r_rep @ ts + t_rep
+    for r, t, _ in equivalents(report, syms):
         cos_ang = (np.trace(r.T @ truth["R"]) - 1.0) / 2.0
         err = (math.degrees(math.acos(max(-1.0, min(1.0, cos_ang)))),
                float(np.linalg.norm(t - truth["t"])))
@@ -397,15 +403,10 @@ def normalisedError(truth, report, syms):
     if "covariance" not in report:
         return None
     cov = np.array(report["covariance"], dtype=np.float64)
-    r_rep = quatToR(report["q_wxyz"])
-    t_rep = np.array(report["t_mm"])
     best = None
-    for rs, ts in syms:
-        r = r_rep @ rs
-        t = r_rep @ ts + t_rep
+    for r, t, a in equivalents(report, syms):
         e = np.concatenate([truth["t"] - t, rotationLog(truth["R"] @ r.T)])
-        # The equivalent's translation moves with the rotation: t' = R ts + t.
-        a = r_rep @ ts
+        # The equivalent's translation moves with the rotation: t' = R ts + t, a = R ts.
         jac = np.eye(6)
         jac[0:3, 3:6] = -np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
         c = jac @ cov @ jac.T
@@ -433,6 +434,9 @@ def main():
     ap.add_argument("--frames", type=int, default=4, help="frames per (target, camera, category)")
     ap.add_argument("--seed", type=int, default=2027)
     ap.add_argument("--out", help="keep the frames and results here")
+    ap.add_argument("--max-sigma-ratio", type=float,
+                    help="fail when, over the correct poses, error/sigma has a standard deviation "
+                    "above this on any axis (the covariance claims more precision than it has)")
     args = ap.parse_args()
 
     out = args.out or tempfile.mkdtemp(prefix="dockpose_independent_")
@@ -557,6 +561,13 @@ def main():
               "(chi2(6): 6), median %.2f (5.35), above the 95 %% point %.1f %% (5 %%)"
               % (len(nees), " ".join("%.2f" % v for v in np.nanstd(z, axis=0)), nees.mean(),
                  float(np.median(nees)), 100.0 * float(np.mean(nees > 12.592))))
+    overconfident = False
+    if args.max_sigma_ratio and z_all:
+        worst = float(np.nanmax(np.nanstd(np.array(z_all), axis=0)))
+        if worst > args.max_sigma_ratio:
+            overconfident = True
+            print("OVERCONFIDENT: error/sigma has a standard deviation of %.2f on an axis "
+                  "(limit %.2f)" % (worst, args.max_sigma_ratio))
     for w in wrong:
         print("WRONG: %s range %.0f mm, error %.2f deg %.1f mm, rotation sigma %.2f deg (worst "
               "axis), %s LEDs, log10 NFA %s" % (w[0], w[1], w[2][0], w[2][1], w[3], w[4], w[5]))
@@ -564,7 +575,7 @@ def main():
         print("POSE ON A TARGET-FREE FRAME:", p)
     if not args.out:
         shutil.rmtree(out)
-    return 1 if wrong or free_poses else 0
+    return 1 if wrong or free_poses or overconfident else 0
 
 
 if __name__ == "__main__":
