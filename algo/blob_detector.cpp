@@ -1007,7 +1007,6 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 
 	BlobMoments g;
 	g.x_min = g.y_min = 0xffff;
-	std::uint32_t at_level = 0; /* grown pixels at or above the detecting level */
 	bool edge[4] = { false, false, false, false }; /* reached x0, x1 - 1, y0, y1 - 1 */
 	while (top > 0) {
 		const std::uint32_t p = stack[--top];
@@ -1040,7 +1039,6 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		g.x_max = std::max<std::uint16_t>(g.x_max, static_cast<std::uint16_t>(x));
 		g.y_min = std::min<std::uint16_t>(g.y_min, static_cast<std::uint16_t>(y));
 		g.y_max = std::max<std::uint16_t>(g.y_max, static_cast<std::uint16_t>(y));
-		at_level += v >= map.levelAt(x, y) ? 1U : 0U;
 		edge[0] = edge[0] || x == x0;
 		edge[1] = edge[1] || x == x1 - 1;
 		edge[2] = edge[2] || y == y0;
