@@ -242,9 +242,10 @@ private:
 	 * only the few pixels the noise lifts above the detecting level, whose
 	 * centroid then lies anywhere along it: its moments over the whole
 	 * spot put it back, and the covariance follows (docs/vision.md). Grown:
-	 * *out holds them. Kept: none (the component reaches its margin, takes
-	 * in another component, or is not such a spot). Cut: it reaches a side
-	 * of `window` inside the frame. Allocates: never.
+	 * *out holds them (several components of one spot grow into the same
+	 * moments: collect() keeps it once). Kept: none (the spot reaches its
+	 * margin, does not hold the whole component, or is not such a spot).
+	 * Cut: it reaches a side of `window` inside the frame. Allocates: never.
 	 */
 	enum class Grow {
 		Kept,
