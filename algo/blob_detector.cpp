@@ -698,13 +698,19 @@ Blob BlobDetector::measure(const BlobMoments &m, double noise_sigma, double nois
 	b.elongation = b.sigma_major_px / b.sigma_minor_px;
 	b.fill = b.area_px / (std::numbers::pi * 4.0 * b.sigma_major_px * b.sigma_minor_px);
 	b.saturated_px = static_cast<int>(m.saturated);
-	if (noise_sigma >= 0.0)
-		centroidCovariance(m, noise_sigma, noise_gain, level_over_background, &b);
+	if (noise_sigma >= 0.0) {
+		/* sum w (x - u_w)^2 etc. about the weighted centroid u_w, for the shot noise. */
+		const WeightedSpread spread{ static_cast<double>(cxx) / sw,
+					     static_cast<double>(cyy) / sw,
+					     static_cast<double>(cxy) / sw };
+		centroidCovariance(m, noise_sigma, noise_gain, level_over_background, spread, &b);
+	}
 	return b;
 }
 
 void BlobDetector::centroidCovariance(const BlobMoments &m, double noise_sigma, double noise_gain,
-				      double level_over_background, Blob *b)
+				      double level_over_background, const WeightedSpread &spread,
+				      Blob *b)
 {
 	__extension__ using Int128 = __int128;
 
@@ -745,30 +751,17 @@ void BlobDetector::centroidCovariance(const BlobMoments &m, double noise_sigma, 
 	 * Shot noise: a pixel's variance grows by g (v - B) = g (w - 1 + c)
 	 * over the background's (c: the level's height over it), so var(u)
 	 * gains g (sum w (x - u)^2 + (c - 1) sum (x - u)^2) / W^2 over the
-	 * noisy pixels. sum w (x - u)^2 from the weighted moments (exact in
-	 * integers about their own centroid, shifted to u), less the clipped
-	 * pixels' share at the clip weight.
+	 * noisy pixels. sum w (x - u)^2 from the weighted spread about the
+	 * weighted centroid, shifted to u, less the clipped pixels' share at
+	 * the clip weight.
 	 */
 	if (noise_gain > 0.0 && m.sum_w > 0) {
-		const Int128 w = static_cast<Int128>(m.sum_w);
 		const double dw = static_cast<double>(m.sum_w);
 		const double ux = static_cast<double>(m.sum_wx) / dw - b->u_px;
 		const double uy = static_cast<double>(m.sum_wy) / dw - b->v_px;
-		double wxx = static_cast<double>(w * static_cast<Int128>(m.sum_wxx) -
-						 static_cast<Int128>(m.sum_wx) *
-							 static_cast<Int128>(m.sum_wx)) /
-				     dw +
-			     dw * ux * ux;
-		double wyy = static_cast<double>(w * static_cast<Int128>(m.sum_wyy) -
-						 static_cast<Int128>(m.sum_wy) *
-							 static_cast<Int128>(m.sum_wy)) /
-				     dw +
-			     dw * uy * uy;
-		double wxy = static_cast<double>(w * static_cast<Int128>(m.sum_wxy) -
-						 static_cast<Int128>(m.sum_wx) *
-							 static_cast<Int128>(m.sum_wy)) /
-				     dw +
-			     dw * ux * uy;
+		double wxx = spread.xx + dw * ux * ux;
+		double wyy = spread.yy + dw * uy * uy;
+		double wxy = spread.xy + dw * ux * uy;
 		if (m.saturated > 0) {
 			const double ns = static_cast<double>(m.saturated);
 			const double clip_w = static_cast<double>(m.peak) -

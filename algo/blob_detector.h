@@ -201,8 +201,13 @@ public:
 
 private:
 	struct Impl;
+	/* sum w (x - u_w)^2, sum w (y - v_w)^2, sum w (x - u_w)(y - v_w) about the weighted centroid. */
+	struct WeightedSpread {
+		double xx = 0.0, yy = 0.0, xy = 0.0;
+	};
 	static void centroidCovariance(const BlobMoments &m, double noise_sigma, double noise_gain,
-				       double level_over_background, Blob *b);
+				       double level_over_background, const WeightedSpread &spread,
+				       Blob *b);
 	/* Label into the component list of impl_ (componentCount() entries). */
 	bool labelImpl(const ImageView &image, const ThresholdMap &map);
 	std::size_t componentCount() const;

@@ -177,8 +177,7 @@ const ThresholdMap &Thresholder::compute(const ImageView &image, ThresholdStats 
 		st->valid = true;
 		sampleNoise(image);
 		st->noise_sigma = noiseSigma().toDouble();
-		st->noise_gain = noiseGain();
-		return map_;
+		return map_; /* no tiles, no backgrounds: noise_gain stays 0 */
 	}
 
 	computeAuto(image, st);
@@ -293,13 +292,11 @@ void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
 				if (noise_row) {
 					/* pairs (x, x + 1): x + 1 is inside the same full tile */
 					for (int c = 0; c < full; ++c) {
-						const int v0 = q[c * tile_stride];
 						const int d =
 							static_cast<int>(q[c * tile_stride + 1]) -
-							v0;
-						const int ad = d < 0 ? -d : d;
+							static_cast<int>(q[c * tile_stride]);
 						++dh[static_cast<std::size_t>(c & 3) * 256 +
-						     static_cast<std::size_t>(ad)];
+						     static_cast<std::size_t>(d < 0 ? -d : d)];
 					}
 				}
 			}
@@ -366,8 +363,6 @@ void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
 
 void Thresholder::sampleNoise(const ImageView &image)
 {
-	gain_hist_.fill(0);
-	gain_level_sum_.fill(0); /* no tiles, no background: no gain (noiseGain() 0) */
 	for (auto &bank : diff_hist_)
 		bank.fill(0);
 	const int step = step_px_;
@@ -394,6 +389,34 @@ void Thresholder::sampleNoise(const ImageView &image)
 	}
 }
 
+namespace {
+
+/*
+ * The median of |d| over a histogram of `bins` bins of n > 0 counts,
+ * interpolated within its bin: value 0 stands for |d| in [0, 0.5), value
+ * b >= 1 for [b - 0.5, b + 0.5). In Q16.16; `bins` (past the last bin) when
+ * the median is not found.
+ */
+UQ16_16 medianAbsDiff(const std::uint32_t *h, std::size_t bins, std::uint64_t n)
+{
+	std::uint64_t below = 0;
+	for (std::size_t b = 0; b < bins; ++b) {
+		const std::uint64_t count = h[b];
+		if (2 * (below + count) >= n && count > 0) {
+			const std::uint64_t lo = b == 0 ? 0 : (2 * b - 1) << 15;
+			const std::uint64_t width = b == 0 ? (1u << 15) : (1u << 16);
+			/* fraction of the bin below the median: (n/2 - below) / count */
+			const std::uint64_t within =
+				((n - 2 * below) * width + count) / (2 * count);
+			return UQ16_16::fromWideRaw(lo + within);
+		}
+		below += count;
+	}
+	return UQ16_16(static_cast<int>(bins));
+}
+
+} /* namespace */
+
 UQ16_16 Thresholder::noiseSigma() const
 {
 	std::uint64_t n = 0;
@@ -405,25 +428,7 @@ UQ16_16 Thresholder::noiseSigma() const
 	if (n == 0)
 		return UQ16_16(0);
 
-	/*
-	 * Median of |d| interpolated within its bin: value 0 stands for |d| in
-	 * [0, 0.5), value b >= 1 for [b - 0.5, b + 0.5). In Q16.16.
-	 */
-	std::uint64_t below = 0;
-	for (std::size_t b = 0; b < 256; ++b) {
-		const std::uint64_t count = h[b];
-		if (2 * (below + count) >= n && count > 0) {
-			const std::uint64_t lo = b == 0 ? 0 : (2 * b - 1) << 15;
-			const std::uint64_t width = b == 0 ? (1u << 15) : (1u << 16);
-			/* fraction of the bin below the median: (n/2 - below) / count */
-			const std::uint64_t within =
-				((n - 2 * below) * width + count) / (2 * count);
-			const UQ16_16 mad = UQ16_16::fromWideRaw(lo + within);
-			return fixedMul<UQ16_16>(mad, kMadToSigma);
-		}
-		below += count;
-	}
-	return UQ16_16(255);
+	return fixedMul<UQ16_16>(medianAbsDiff(h.data(), h.size(), n), kMadToSigma);
 }
 
 double Thresholder::noiseGain() const
@@ -431,7 +436,7 @@ double Thresholder::noiseGain() const
 	/*
 	 * Photon transfer within the frame: per band of kGainBandLevels levels
 	 * of the tiles' backgrounds with at least kGainMinPairs pairs, the pixel
-	 * variance from the median |d| (interpolated as in noiseSigma(); spots'
+	 * variance from the median |d| (medianAbsDiff(), as noiseSigma(); spots'
 	 * edges are outliers there too) against the band's mean level; a
 	 * straight line through them, each weighted by the inverse of its
 	 * variance's own variance (a MAD-based variance of n Gaussian pairs:
@@ -453,18 +458,7 @@ double Thresholder::noiseGain() const
 			n += h[d];
 		if (n < kGainMinPairs)
 			continue;
-		std::uint64_t below = 0;
-		double mad = static_cast<double>(kGainDiffs);
-		for (std::size_t d = 0; d < kGainDiffs; ++d) {
-			if (2 * (below + h[d]) >= n && h[d] > 0) {
-				const double lo = d == 0 ? 0.0 : static_cast<double>(d) - 0.5;
-				const double width = d == 0 ? 0.5 : 1.0;
-				mad = lo + width * static_cast<double>(n - 2 * below) /
-						   (2.0 * static_cast<double>(h[d]));
-				break;
-			}
-			below += h[d];
-		}
+		const double mad = medianAbsDiff(h, kGainDiffs, n).toDouble();
 		if (mad >= static_cast<double>(kGainDiffs) - 1.0)
 			continue; /* not a background's band: mostly edges */
 		const double sigma = 1.4826 * mad / std::numbers::sqrt2;

@@ -80,7 +80,7 @@ struct ThresholdStats {
 	 * of signal, var(v) = noise_sigma^2 + noise_gain * (v - background)
 	 * (the sensor's levels per electron), fitted to the noise against the
 	 * level over the frame's own sample (Thresholder::noiseGain()); 0 when
-	 * the sample's levels span too little to show it (both modes).
+	 * the sample's levels span too little to show it (Auto only: 0 in Fixed mode).
 	 */
 	double noise_gain = 0.0;
 	int tiles_x = 0; /* the tile grid */
