@@ -249,7 +249,7 @@ struct BlobDetector::Impl {
 		  level_row(static_cast<std::size_t>(max_w) + 64),
 		  block_level(static_cast<std::size_t>(max_w) / 64 + 1),
 		  grow_seen(static_cast<std::size_t>(kGrowSide) * kGrowSide),
-		  grow_stack(static_cast<std::size_t>(kGrowSide) * kGrowSide)
+		  grow_stack(4 * static_cast<std::size_t>(kGrowSide) * kGrowSide)
 	{
 	}
 
@@ -316,7 +316,7 @@ struct BlobDetector::Impl {
 	/* The level of every pixel of the current tile row; the lowest level of each 64-byte block. */
 	std::vector<std::uint8_t> level_row;
 	std::vector<U8x16> block_level;
-	/* grow(): the pixels of its window seen, and its flood's stack (x | y << 16). */
+	/* grow(): the pixels of its area taken, and its span fill's seeds (x | y << 16). */
 	std::vector<std::uint8_t> grow_seen;
 	std::vector<std::uint32_t> grow_stack;
 	std::size_t labels = 0;
@@ -969,8 +969,37 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		y1 = std::min(y1, window->y1);
 	}
 	const int side_x = x1 - x0;
+	auto index = [&](int x, int y) {
+		return static_cast<std::size_t>(y - y0) * side_x + static_cast<std::size_t>(x - x0);
+	};
+	/*
+	 * Each pixel's tile, stepped along the area's columns and rows (a flood
+	 * reads a pixel's level up to nine times: no division per read).
+	 */
+	const bool tiled = map.cols() > 0;
+	const std::uint8_t untiled_level = map.levelAt(0, 0);
+	std::array<int, kGrowSide> tile_col{};
+	std::array<const std::uint8_t *, kGrowSide> tile_levels{};
+	{
+		const int tile = tiled ? map.tilePx() : kMaxFrameSide;
+		int c = tiled ? std::min(x0 / tile, map.cols() - 1) : 0;
+		for (int x = x0; x < x1; ++x) {
+			if (tiled && c < map.cols() - 1 && x >= (c + 1) * tile)
+				++c;
+			tile_col[static_cast<std::size_t>(x - x0)] = c;
+		}
+		int r = tiled ? std::min(y0 / tile, map.rows() - 1) : 0;
+		for (int y = y0; y < y1; ++y) {
+			if (tiled && r < map.rows() - 1 && y >= (r + 1) * tile)
+				++r;
+			tile_levels[static_cast<std::size_t>(y - y0)] = tiled ? map.rowLevels(r)
+									      : &untiled_level;
+		}
+	}
 	auto low_level = [&](int x, int y) {
-		return std::max(0, map.levelAt(x, y) - delta);
+		return std::max(0, tile_levels[static_cast<std::size_t>(y - y0)]
+					      [tile_col[static_cast<std::size_t>(x - x0)]] -
+					   delta);
 	};
 
 	/* The seed: the component's peak pixel (the first at its value, at or above its level). */
@@ -987,68 +1016,94 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 	if (seed_x < 0)
 		return Grow::Kept;
 
+	/*
+	 * A span fill: each row's run of pixels at or above the low level is
+	 * taken whole, and the runs of the rows above and below that touch it
+	 * (8-connected: one pixel beyond each end) are seeded. The same pixels
+	 * as a pixel-by-pixel flood, read about three times each instead of nine.
+	 */
 	std::uint8_t *seen = impl_->grow_seen.data();
 	std::fill_n(seen, static_cast<std::size_t>(side_x) * (y1 - y0), std::uint8_t{ 0 });
 	std::uint32_t *stack = impl_->grow_stack.data();
+	const std::size_t stack_capacity = impl_->grow_stack.size();
 	std::size_t top = 0;
-	auto index = [&](int x, int y) {
-		return static_cast<std::size_t>(y - y0) * side_x + static_cast<std::size_t>(x - x0);
+	auto push = [&](int x, int y) {
+		stack[top++] = static_cast<std::uint32_t>(x) | static_cast<std::uint32_t>(y) << 16;
 	};
-	seen[index(seed_x, seed_y)] = 1;
-	stack[top++] = static_cast<std::uint32_t>(seed_x) | static_cast<std::uint32_t>(seed_y)
-								    << 16;
+	push(seed_x, seed_y);
 
 	BlobMoments g;
 	g.x_min = g.y_min = 0xffff;
 	bool edge[4] = { false, false, false, false }; /* reached x0, x1 - 1, y0, y1 - 1 */
 	while (top > 0) {
 		const std::uint32_t p = stack[--top];
-		const int x = static_cast<int>(p & 0xffff), y = static_cast<int>(p >> 16);
-		const std::uint8_t v = image.row(y)[x];
-		const int t = low_level(x, y);
-		const std::uint64_t w =
-			static_cast<std::uint64_t>(v) + 1U - static_cast<std::uint64_t>(t);
-		const std::uint64_t ux = static_cast<std::uint64_t>(x),
-				    uy = static_cast<std::uint64_t>(y);
-		++g.area;
-		g.sum_w += w;
-		g.sum_wx += w * ux;
-		g.sum_wy += w * uy;
-		g.sum_wxx += w * ux * ux;
-		g.sum_wyy += w * uy * uy;
-		g.sum_wxy += w * ux * uy;
-		++g.noisy;
-		g.sum_x += ux;
-		g.sum_y += uy;
-		g.sum_xx += ux * ux;
-		g.sum_yy += uy * uy;
-		g.sum_xy += ux * uy;
-		g.sum_t += static_cast<std::uint64_t>(t);
-		g.sum_tx += static_cast<std::uint64_t>(t) * ux;
-		g.sum_ty += static_cast<std::uint64_t>(t) * uy;
-		g.level_min = std::min<std::uint8_t>(g.level_min, static_cast<std::uint8_t>(t));
-		g.peak = std::max(g.peak, v);
-		g.x_min = std::min<std::uint16_t>(g.x_min, static_cast<std::uint16_t>(x));
-		g.x_max = std::max<std::uint16_t>(g.x_max, static_cast<std::uint16_t>(x));
+		const int sx = static_cast<int>(p & 0xffff), y = static_cast<int>(p >> 16);
+		if (seen[index(sx, y)])
+			continue;
+		const std::uint8_t *row = image.row(y);
+		/* The run through the seed (none of it seen: a run is always taken whole). */
+		int xl = sx, xr = sx;
+		while (xl > x0 && row[xl - 1] >= low_level(xl - 1, y))
+			--xl;
+		while (xr < x1 - 1 && row[xr + 1] >= low_level(xr + 1, y))
+			++xr;
+		const std::uint64_t uy = static_cast<std::uint64_t>(y);
+		for (int x = xl; x <= xr; ++x) {
+			seen[index(x, y)] = 1;
+			const std::uint8_t v = row[x];
+			const int t = low_level(x, y);
+			const std::uint64_t w =
+				static_cast<std::uint64_t>(v) + 1U - static_cast<std::uint64_t>(t);
+			const std::uint64_t ux = static_cast<std::uint64_t>(x);
+			g.sum_w += w;
+			g.sum_wx += w * ux;
+			g.sum_wy += w * uy;
+			g.sum_wxx += w * ux * ux;
+			g.sum_wyy += w * uy * uy;
+			g.sum_wxy += w * ux * uy;
+			g.sum_x += ux;
+			g.sum_y += uy;
+			g.sum_xx += ux * ux;
+			g.sum_yy += uy * uy;
+			g.sum_xy += ux * uy;
+			g.sum_t += static_cast<std::uint64_t>(t);
+			g.sum_tx += static_cast<std::uint64_t>(t) * ux;
+			g.sum_ty += static_cast<std::uint64_t>(t) * uy;
+			g.level_min =
+				std::min<std::uint8_t>(g.level_min, static_cast<std::uint8_t>(t));
+			g.peak = std::max(g.peak, v);
+		}
+		const auto n = static_cast<std::uint32_t>(xr - xl + 1);
+		g.area += n;
+		g.noisy += n;
+		g.x_min = std::min<std::uint16_t>(g.x_min, static_cast<std::uint16_t>(xl));
+		g.x_max = std::max<std::uint16_t>(g.x_max, static_cast<std::uint16_t>(xr));
 		g.y_min = std::min<std::uint16_t>(g.y_min, static_cast<std::uint16_t>(y));
 		g.y_max = std::max<std::uint16_t>(g.y_max, static_cast<std::uint16_t>(y));
-		edge[0] = edge[0] || x == x0;
-		edge[1] = edge[1] || x == x1 - 1;
+		edge[0] = edge[0] || xl == x0;
+		edge[1] = edge[1] || xr == x1 - 1;
 		edge[2] = edge[2] || y == y0;
 		edge[3] = edge[3] || y == y1 - 1;
-		for (int dy = -1; dy <= 1; ++dy) {
-			const int ny = y + dy;
+		/* Seed each run of the rows above and below that touches this one. */
+		for (int ny = y - 1; ny <= y + 1; ny += 2) {
 			if (ny < y0 || ny >= y1)
 				continue;
-			const std::uint8_t *row = image.row(ny);
-			for (int dx = -1; dx <= 1; ++dx) {
-				const int nx = x + dx;
-				if (nx < x0 || nx >= x1 || seen[index(nx, ny)])
-					continue;
-				seen[index(nx, ny)] = 1;
-				if (row[nx] >= low_level(nx, ny))
-					stack[top++] = static_cast<std::uint32_t>(nx) |
-						       static_cast<std::uint32_t>(ny) << 16;
+			const std::uint8_t *nrow = image.row(ny);
+			bool in_run = false;
+			for (int x = std::max(x0, xl - 1); x <= std::min(x1 - 1, xr + 1); ++x) {
+				const bool take = !seen[index(x, ny)] &&
+						  nrow[x] >= low_level(x, ny);
+				if (take && !in_run) {
+					/*
+					 * Seeds: a few per run at most (its rows' neighbouring
+					 * runs), the stack four per pixel of the area; a pattern
+					 * that would need more keeps the component's measurement.
+					 */
+					if (top == stack_capacity)
+						return Grow::Kept;
+					push(x, ny);
+				}
+				in_run = take;
 			}
 		}
 	}
