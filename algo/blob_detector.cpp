@@ -1047,32 +1047,55 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 			--xl;
 		while (xr < x1 - 1 && row[xr + 1] >= low_level(xr + 1, y))
 			++xr;
-		const std::uint64_t uy = static_cast<std::uint64_t>(y);
+		/*
+		 * The run's sums about its first pixel in 32 bits (a run is at most
+		 * kGrowSide long: w dx^2 <= 256 * 63^2 per pixel), moved to the frame's
+		 * origin once per run: the same integers as summing x, x^2 per pixel.
+		 */
+		std::uint32_t rw = 0, rwd = 0, rwdd = 0, rt = 0, rtd = 0;
+		std::uint8_t rpeak = 0;
+		int rlmin = 255;
+		std::uint8_t *seen_row = seen + index(xl, y);
 		for (int x = xl; x <= xr; ++x) {
-			seen[index(x, y)] = 1;
+			const auto d = static_cast<std::uint32_t>(x - xl);
+			seen_row[d] = 1;
 			const std::uint8_t v = row[x];
 			const int t = low_level(x, y);
-			const std::uint64_t w =
-				static_cast<std::uint64_t>(v) + 1U - static_cast<std::uint64_t>(t);
-			const std::uint64_t ux = static_cast<std::uint64_t>(x);
-			g.sum_w += w;
-			g.sum_wx += w * ux;
-			g.sum_wy += w * uy;
-			g.sum_wxx += w * ux * ux;
-			g.sum_wyy += w * uy * uy;
-			g.sum_wxy += w * ux * uy;
-			g.sum_x += ux;
-			g.sum_y += uy;
-			g.sum_xx += ux * ux;
-			g.sum_yy += uy * uy;
-			g.sum_xy += ux * uy;
-			g.sum_t += static_cast<std::uint64_t>(t);
-			g.sum_tx += static_cast<std::uint64_t>(t) * ux;
-			g.sum_ty += static_cast<std::uint64_t>(t) * uy;
-			g.level_min =
-				std::min<std::uint8_t>(g.level_min, static_cast<std::uint8_t>(t));
-			g.peak = std::max(g.peak, v);
+			const std::uint32_t w =
+				static_cast<std::uint32_t>(v) + 1U - static_cast<std::uint32_t>(t);
+			rw += w;
+			rwd += w * d;
+			rwdd += w * d * d;
+			rt += static_cast<std::uint32_t>(t);
+			rtd += static_cast<std::uint32_t>(t) * d;
+			rpeak = std::max(rpeak, v);
+			rlmin = std::min(rlmin, t);
 		}
+		const std::uint64_t n64 = static_cast<std::uint64_t>(xr - xl + 1);
+		const std::uint64_t ux = static_cast<std::uint64_t>(xl),
+				    uy = static_cast<std::uint64_t>(y);
+		/* sum w x = xl sum w + sum w d; sum w x^2 = xl^2 sum w + 2 xl sum w d + sum w d^2 */
+		const std::uint64_t swx = ux * rw + rwd;
+		g.sum_w += rw;
+		g.sum_wx += swx;
+		g.sum_wy += uy * rw;
+		g.sum_wxx += ux * ux * rw + 2U * ux * rwd + rwdd;
+		g.sum_wyy += uy * uy * rw;
+		g.sum_wxy += uy * swx;
+		/* sum d = n (n - 1) / 2, sum d^2 = (n - 1) n (2n - 1) / 6 over d = 0 .. n - 1 */
+		const std::uint64_t sd = n64 * (n64 - 1U) / 2U;
+		const std::uint64_t sdd = (n64 - 1U) * n64 * (2U * n64 - 1U) / 6U;
+		const std::uint64_t run_x = ux * n64 + sd;
+		g.sum_x += run_x;
+		g.sum_y += uy * n64;
+		g.sum_xx += ux * ux * n64 + 2U * ux * sd + sdd;
+		g.sum_yy += uy * uy * n64;
+		g.sum_xy += uy * run_x;
+		g.sum_t += rt;
+		g.sum_tx += ux * rt + rtd;
+		g.sum_ty += uy * rt;
+		g.level_min = std::min<std::uint8_t>(g.level_min, static_cast<std::uint8_t>(rlmin));
+		g.peak = std::max(g.peak, rpeak);
 		const auto n = static_cast<std::uint32_t>(xr - xl + 1);
 		g.area += n;
 		g.noisy += n;
