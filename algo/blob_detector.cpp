@@ -1071,7 +1071,8 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 			rpeak = std::max(rpeak, v);
 			rlmin = std::min(rlmin, t);
 		}
-		const std::uint64_t n64 = static_cast<std::uint64_t>(xr - xl + 1);
+		const int run_px = xr - xl + 1;
+		const auto n64 = static_cast<std::uint64_t>(run_px);
 		const std::uint64_t ux = static_cast<std::uint64_t>(xl),
 				    uy = static_cast<std::uint64_t>(y);
 		/* sum w x = xl sum w + sum w d; sum w x^2 = xl^2 sum w + 2 xl sum w d + sum w d^2 */
@@ -1096,7 +1097,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		g.sum_ty += uy * rt;
 		g.level_min = std::min<std::uint8_t>(g.level_min, static_cast<std::uint8_t>(rlmin));
 		g.peak = std::max(g.peak, rpeak);
-		const auto n = static_cast<std::uint32_t>(xr - xl + 1);
+		const auto n = static_cast<std::uint32_t>(run_px);
 		g.area += n;
 		g.noisy += n;
 		g.x_min = std::min<std::uint16_t>(g.x_min, static_cast<std::uint16_t>(xl));
