@@ -110,7 +110,7 @@ struct CorrespondenceConfig {
 	double max_rms_px = 0.6;
 	/* Neighbours of each candidate that span its quadrilaterals, and its triangles. */
 	int neighbours = 9;
-	int triangle_neighbours = 6;
+	int triangle_neighbours = 4;
 	/* Centroid error (px) the invariant screen tolerates beyond the blob's own sigma. */
 	double screen_sigma_px = 1.0;
 	/*

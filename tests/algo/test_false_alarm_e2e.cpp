@@ -330,7 +330,8 @@ TEST_P(EarlyExit, FindsTheExhaustiveSearchsPoseSooner)
 	EXPECT_TRUE(early.correct) << x.rule;
 	EXPECT_LT((early.pose.t_mm - exhaustive.pose.t_mm).norm(), 1e-6) << x.rule;
 	EXPECT_LT((early.pose.R - exhaustive.pose.R).norm(), 1e-9) << x.rule;
-	EXPECT_LT(3 * early.hypotheses, exhaustive.hypotheses) << x.rule;
+	/* Without its rule either frame's search runs on to about the exhaustive count. */
+	EXPECT_LT(2 * early.hypotheses, exhaustive.hypotheses) << x.rule;
 	std::printf("[ early exit ] %s: %d hypotheses, %d without the early exit\n", x.rule,
 		    early.hypotheses, exhaustive.hypotheses);
 }
