@@ -969,6 +969,8 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		y1 = std::min(y1, window->y1);
 	}
 	const int side_x = x1 - x0;
+	const bool any_window_side = window_side[0] || window_side[1] || window_side[2] ||
+				     window_side[3];
 	auto index = [&](int x, int y) {
 		return static_cast<std::size_t>(y - y0) * side_x + static_cast<std::size_t>(x - x0);
 	};
@@ -1108,6 +1110,15 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		edge[1] = edge[1] || xr == x1 - 1;
 		edge[2] = edge[2] || y == y0;
 		edge[3] = edge[3] || y == y1 - 1;
+		/*
+		 * A margin reached where no window side can be (a spot on a brighter
+		 * surrounding): kept as it was, whatever else the flood would reach,
+		 * so the flood stops (a sunlit patch's spots would flood their whole
+		 * area first).
+		 */
+		if (!any_window_side && ((edge[0] && x0 > 0) || (edge[1] && x1 < image.width) ||
+					 (edge[2] && y0 > 0) || (edge[3] && y1 < image.height)))
+			return Grow::Kept;
 		/* Seed each run of the rows above and below that touches this one. */
 		for (int ny = y - 1; ny <= y + 1; ny += 2) {
 			if (ny < y0 || ny >= y1)
