@@ -971,6 +971,15 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 	const int side_x = x1 - x0;
 	const bool any_window_side = window_side[0] || window_side[1] || window_side[2] ||
 				     window_side[3];
+	/* A side of the search area that is the margin's (neither the frame's nor a window's). */
+	const bool margin_side[4] = { x0 > 0 && !window_side[0],
+				      x1 < image.width && !window_side[1],
+				      y0 > 0 && !window_side[2],
+				      y1 < image.height && !window_side[3] };
+	auto margin_reached = [&](const bool reached[4]) {
+		return (reached[0] && margin_side[0]) || (reached[1] && margin_side[1]) ||
+		       (reached[2] && margin_side[2]) || (reached[3] && margin_side[3]);
+	};
 	auto index = [&](int x, int y) {
 		return static_cast<std::size_t>(y - y0) * side_x + static_cast<std::size_t>(x - x0);
 	};
@@ -1116,8 +1125,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		 * so the flood stops (a sunlit patch's spots would flood their whole
 		 * area first).
 		 */
-		if (!any_window_side && ((edge[0] && x0 > 0) || (edge[1] && x1 < image.width) ||
-					 (edge[2] && y0 > 0) || (edge[3] && y1 < image.height)))
+		if (!any_window_side && margin_reached(edge))
 			return Grow::Kept;
 		/* Seed each run of the rows above and below that touches this one. */
 		for (int ny = y - 1; ny <= y + 1; ny += 2) {
@@ -1154,12 +1162,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 	 * is one spot the noise broke up at that level (a blurred streak):
 	 * each of them grows into the same spot, which collect() keeps once.
 	 */
-	const bool margin_x0 = x0 > 0 && !window_side[0],
-		   margin_x1 = x1 < image.width && !window_side[1];
-	const bool margin_y0 = y0 > 0 && !window_side[2],
-		   margin_y1 = y1 < image.height && !window_side[3];
-	if ((edge[0] && margin_x0) || (edge[1] && margin_x1) || (edge[2] && margin_y0) ||
-	    (edge[3] && margin_y1) || g.x_min > m.x_min || g.x_max < m.x_max || g.y_min > m.y_min ||
+	if (margin_reached(edge) || g.x_min > m.x_min || g.x_max < m.x_max || g.y_min > m.y_min ||
 	    g.y_max < m.y_max)
 		return Grow::Kept;
 	*out = g;
