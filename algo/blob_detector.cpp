@@ -932,6 +932,7 @@ bool BlobDetector::detectWindows(const ImageView &image, const PixelWindow *wind
 		for (std::size_t c = 0; c < impl_->components; ++c)
 			if (cutByWindow(comps[c], w, image)) {
 				st->window_cut = true;
+				st->cut_reach = cutReach(comps[c], &w, image);
 				return false;
 			}
 		st->components += static_cast<int>(impl_->components);
@@ -1410,6 +1411,27 @@ bool BlobDetector::overlapsBlob(const BlobMoments &m,
  * Does a component touch a side of `window` that lies inside the frame (so
  * that it may go on beyond the window)? Allocates: never.
  */
+/*
+ * BlobStats::cut_reach of a component: grow()'s search box around it, and
+ * where `window` (when the labelling cut it, not grow()) has a side through
+ * it, as far again as the largest spot grow() measures.
+ */
+PixelWindow BlobDetector::cutReach(const BlobMoments &m, const PixelWindow *window,
+				   const ImageView &image)
+{
+	auto beyond = [window](bool side_cut) {
+		return kGrowMargin + (window && side_cut ? kGrowMaxBox : 0);
+	};
+	const bool cut_x0 = window && m.x_min == window->x0;
+	const bool cut_x1 = window && m.x_max + 1 == window->x1;
+	const bool cut_y0 = window && m.y_min == window->y0;
+	const bool cut_y1 = window && m.y_max + 1 == window->y1;
+	return PixelWindow{ std::max(0, m.x_min - beyond(cut_x0)),
+			    std::max(0, m.y_min - beyond(cut_y0)),
+			    std::min(image.width, m.x_max + 1 + beyond(cut_x1)),
+			    std::min(image.height, m.y_max + 1 + beyond(cut_y1)) };
+}
+
 bool BlobDetector::cutByWindow(const BlobMoments &m, const PixelWindow &window,
 			       const ImageView &image)
 {
@@ -1543,6 +1565,7 @@ void BlobDetector::collect(const ImageView &image, BlobStats *st,
 					    look == Look::Windows ? window : nullptr, &grown);
 			if (g == Grow::Cut) {
 				st->window_cut = true;
+				st->cut_reach = cutReach(m, nullptr, image);
 				return;
 			}
 			if (g == Grow::Grown) {

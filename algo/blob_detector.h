@@ -123,6 +123,13 @@ struct BlobStats {
 	int dropped_capacity = 0; /* valid blobs beyond kMaxCandidates (weakest dropped) */
 	bool component_overflow = false; /* more than kMaxComponents: frame too cluttered */
 	bool window_cut = false; /* detectWindows(): a component reaches beyond a window */
+	/*
+	 * detectWindows(), with window_cut: the box (frame coordinates, inside
+	 * the frame) the cutting window must also cover for that component to be
+	 * read whole, as far as the cut shows: the box grow() searches around
+	 * it, and beyond a side the window cut, room for the largest spot grown.
+	 */
+	PixelWindow cut_reach;
 	/* detect(): spots found on the threshold's cells below their tile's level (Thresholder::cellMap()) */
 	int below_tile_level = 0;
 	/*
@@ -269,6 +276,8 @@ private:
 	static bool standsOut(const ImageView &image, const BlobMoments &m, int contrast);
 	static bool cutByWindow(const BlobMoments &m, const PixelWindow &window,
 				const ImageView &image);
+	static PixelWindow cutReach(const BlobMoments &m, const PixelWindow *window,
+				    const ImageView &image);
 	bool clippedLikeASpot(const BlobMoments &m) const;
 	bool solidCore(const ImageView &image, const BlobMoments &m) const;
 	static bool overlapsBlob(const BlobMoments &m,

@@ -149,6 +149,25 @@ Pose Pipeline::predictedPose() const
 	return next;
 }
 
+/* Windows that overlap or touch become their bounding box (a spot on the seam stays whole). */
+void Pipeline::mergeWindows()
+{
+	for (bool merged = true; merged;) {
+		merged = false;
+		for (std::size_t a = 0; a < windows_.size() && !merged; ++a) {
+			for (std::size_t b = a + 1; b < windows_.size(); ++b) {
+				if (!overlapOrTouch(windows_[a], windows_[b]))
+					continue;
+				windows_[a] = boundingBox(windows_[a], windows_[b]);
+				windows_[b] = windows_.back();
+				windows_.pop_back();
+				merged = true;
+				break;
+			}
+		}
+	}
+}
+
 bool Pipeline::processWindows(const ImageView &frame)
 {
 	const CameraIntrinsics &k = camera_.intrinsics();
@@ -178,39 +197,30 @@ bool Pipeline::processWindows(const ImageView &frame)
 		if (w.x0 < w.x1 && w.y0 < w.y1)
 			windows_.push_back(w);
 	}
-	/* Windows that overlap or touch become their bounding box (a spot on the seam stays whole). */
-	for (bool merged = true; merged;) {
-		merged = false;
-		for (std::size_t a = 0; a < windows_.size() && !merged; ++a) {
-			for (std::size_t b = a + 1; b < windows_.size(); ++b) {
-				if (!overlapOrTouch(windows_[a], windows_[b]))
-					continue;
-				windows_[a] = boundingBox(windows_[a], windows_[b]);
-				windows_[b] = windows_.back();
-				windows_.pop_back();
-				merged = true;
-				break;
-			}
-		}
-	}
+	mergeWindows();
 	if (windows_.size() == 0)
 		return false;
 
 	/*
-	 * A spot on the seam between two windows (clutter between LEDs) is cut:
-	 * then one window around them all, and when that cuts a spot too, the
-	 * whole frame.
+	 * A spot a window's side cuts (clutter at a window's edge or on the seam
+	 * between two): that window widened to the spot's reach
+	 * (BlobStats::cut_reach), merged with any it now touches, and read again;
+	 * after kMaxWidenings, the whole frame.
 	 */
 	BlobStats stats;
-	bool ok = detector_.detectWindows(frame, windows_.data(), windows_.size(), &blobs_, &stats);
-	if (!ok && stats.window_cut && windows_.size() > 1) {
-		PixelWindow all = windows_[0];
-		for (const PixelWindow &w : windows_)
-			all = boundingBox(all, w);
-		windows_.clear();
-		windows_.push_back(all);
+	bool ok = false;
+	for (int widenings = 0;; ++widenings) {
 		ok = detector_.detectWindows(frame, windows_.data(), windows_.size(), &blobs_,
 					     &stats);
+		if (ok || !stats.window_cut || widenings == kMaxWidenings)
+			break;
+		/* The cut component lies inside its window, so some window touches its reach. */
+		for (PixelWindow &w : windows_)
+			if (overlapOrTouch(w, stats.cut_reach)) {
+				w = boundingBox(w, stats.cut_reach);
+				break;
+			}
+		mergeWindows();
 	}
 	if (!ok || blobs_.size() < 4)
 		return false;

@@ -73,8 +73,10 @@ struct PipelineConfig {
 	 * windows around the predicted LEDs are read, and every
 	 * full_frame_every-th frame the whole frame, to re-measure the
 	 * background, the noise and the clutter density that acceptance uses.
-	 * A frame whose windows fail (a spot cut by a window's side, too few
-	 * blobs, no tracked match) is read whole at once, as without windows.
+	 * A window whose side cuts a spot (clutter at its edge, a seam between
+	 * two) is widened to hold that spot and read again, up to 3 times; a
+	 * frame whose windows still fail (a spot cut, too few blobs, no tracked
+	 * match) is read whole at once, as without windows.
 	 * 1: the whole frame every frame.
 	 *
 	 * A window is centred where the LED's last image motion carries it
@@ -129,6 +131,9 @@ public:
 private:
 	/* The regions-of-interest pass of one tracked frame; false: read the whole frame. */
 	bool processWindows(const ImageView &frame);
+	void mergeWindows();
+	/* A window that cuts a spot is widened at most this often a frame (processWindows()). */
+	static constexpr int kMaxWidenings = 3;
 	void setFound(const CorrespondenceResult &match);
 	bool preciseEnough(const CorrespondenceResult &match) const;
 

@@ -876,6 +876,64 @@ TEST(BlobWindows, RefuseACutSpotAFrameWithoutReferenceAndBadWindows)
 }
 
 /*
+ * A window whose side cuts a spot names where it must reach
+ * (BlobStats::cut_reach): widened so, it reads the spot as detect() does.
+ * Both cuts: the labelling's (a side through the spot) and grow()'s (a side
+ * just outside the thresholded spot, inside the faint skirt it measures).
+ */
+TEST(BlobWindows, ACutWindowWidenedToItsReachReadsTheSpotWhole)
+{
+	/* A Gaussian spot (sigma 2 px, 150 levels) on a noisy background: a skirt below the threshold. */
+	StridedFrame f(300, 200, 313);
+	std::mt19937 rng(11);
+	std::normal_distribution<double> noise(0.0, 2.0);
+	const double cu = 150.3, cv = 100.6;
+	for (int y = 0; y < 200; ++y)
+		for (int x = 0; x < 300; ++x) {
+			const double d2 = (x - cu) * (x - cu) + (y - cv) * (y - cv);
+			f.at(x, y) = static_cast<std::uint8_t>(std::clamp(
+				30.0 + 150.0 * std::exp(-d2 / 8.0) + noise(rng), 0.0, 255.0));
+		}
+	const std::vector<Eigen::Vector2d> centres{ { cu, cv } };
+	BlobDetector det(300, 200, ThresholdConfig{}, BlobFilterConfig{});
+	StaticVector<Blob, kMaxCandidates> blobs;
+	BlobStats stats;
+	ASSERT_TRUE(det.detect(f.view(), &blobs, &stats));
+	ASSERT_EQ(blobs.size(), 1u);
+	const Blob spot = blobs[0];
+	/*
+	 * Windows centred on the spot and off it, from one through its middle to
+	 * ones holding its skirt: each refused one is widened to its reach until
+	 * it is read (at most 3 times, as the pipeline does).
+	 */
+	const int u = static_cast<int>(cu), v = static_cast<int>(cv);
+	int refused = 0;
+	for (int half = 1; half <= 14; ++half)
+		for (int shift = -half; shift <= half; shift += half) {
+			PixelWindow w{ u + shift - half, v - half, u + shift + half + 1,
+				       v + half + 1 };
+			int widenings = 0;
+			while (!det.detectWindows(f.view(), &w, 1, &blobs, &stats)) {
+				ASSERT_TRUE(stats.window_cut) << half << " " << shift;
+				ASSERT_LT(widenings, 3) << half << " " << shift;
+				const PixelWindow r = stats.cut_reach;
+				ASSERT_TRUE(r.x0 >= 0 && r.y0 >= 0 && r.x1 <= 300 && r.y1 <= 200 &&
+					    r.x0 < r.x1 && r.y0 < r.y1);
+				/* The reach touches the window that cut (the cut part lies in both). */
+				ASSERT_TRUE(r.x0 <= w.x1 && w.x0 <= r.x1 && r.y0 <= w.y1 &&
+					    w.y0 <= r.y1);
+				w = PixelWindow{ std::min(w.x0, r.x0), std::min(w.y0, r.y0),
+						 std::max(w.x1, r.x1), std::max(w.y1, r.y1) };
+				++widenings;
+			}
+			refused += widenings > 0;
+			ASSERT_EQ(blobs.size(), 1u) << half << " " << shift;
+			EXPECT_TRUE(sameBlob(blobs[0], spot)) << half << " " << shift;
+		}
+	EXPECT_GE(refused, 20);
+}
+
+/*
  * A faint spot at the foot of a sunlit patch's flank: its 64 px tile reaches
  * up onto the patch, the tile's level (its brightest corner's interpolation
  * plus the contrast) lies far above the spot's peak, and only the
