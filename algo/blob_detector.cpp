@@ -1300,7 +1300,9 @@ void BlobDetector::lookForPeaks(const ImageView &image, const PixelWindow &box, 
 				StaticVector<Blob, kMaxCandidates> *blobs, int *peaks)
 {
 	constexpr int kR = kPeakRingPx;
-	const int clip = filter_.clip_level;
+	constexpr int kPeakScan = 64;
+	/* The highest unclipped level (clip_level 1..256). */
+	const auto top = static_cast<std::uint8_t>(filter_.clip_level - 1);
 	const int x0 = std::max(box.x0, kR), x1 = std::min(box.x1, image.width - kR);
 	const int y0 = std::max(box.y0, kR), y1 = std::min(box.y1, image.height - kR);
 	const ThresholdMap &tiles = thresholder_.map();
@@ -1311,21 +1313,36 @@ void BlobDetector::lookForPeaks(const ImageView &image, const PixelWindow &box, 
 		for (int x = x0; x < x1;) {
 			/* Tile by tile along the row, so the level is looked up once per tile. */
 			const int end = std::min(x1, (x / tile + 1) * tile);
-			const int level = tiles.levelAt(x, y);
-			for (; x < end; ++x) {
-				const int v = row[x];
-				/*
-				 * Only where the first look segmented (the dropped
-				 * component's pixels are there); a maximum: above the
-				 * neighbours before it in scan order, not below those after.
-				 */
-				if (v < level || v >= clip || v <= row[x - 1] || v <= up[x - 1] ||
-				    v <= up[x] || v <= up[x + 1] || v < row[x + 1] ||
-				    v < down[x - 1] || v < down[x] || v < down[x + 1])
-					continue;
-				peakAt(image, x, y, v, st, blobs, peaks);
-				if (*peaks >= static_cast<int>(kMaxInnerPeaks))
-					return;
+			const auto level = static_cast<std::uint8_t>(tiles.levelAt(x, y));
+			/*
+			 * Only where the first look segmented (the dropped
+			 * component's pixels are there); a maximum: above the
+			 * neighbours before it in scan order, not below those after.
+			 * Marked branch-free 64 pixels at a time (the compiler
+			 * vectorises it: a sunlit patch's box holds ~10^5 pixels),
+			 * then visited in order.
+			 */
+			for (int n = 0; x < end; x += n) {
+				n = std::min(kPeakScan, end - x);
+				std::array<std::uint8_t, kPeakScan> mark{};
+				for (int k = 0; k < n; ++k) {
+					const int c = x + k;
+					const std::uint8_t v = row[c];
+					mark[static_cast<std::size_t>(k)] =
+						static_cast<std::uint8_t>(
+							(v >= level) & (v <= top) &
+							(v > row[c - 1]) & (v > up[c - 1]) &
+							(v > up[c]) & (v > up[c + 1]) &
+							(v >= row[c + 1]) & (v >= down[c - 1]) &
+							(v >= down[c]) & (v >= down[c + 1]));
+				}
+				for (int k = 0; k < n; ++k) {
+					if (!mark[static_cast<std::size_t>(k)])
+						continue;
+					peakAt(image, x + k, y, row[x + k], st, blobs, peaks);
+					if (*peaks >= static_cast<int>(kMaxInnerPeaks))
+						return;
+				}
 			}
 		}
 	}
@@ -1342,9 +1359,19 @@ void BlobDetector::peakAt(const ImageView &image, int x, int y, int v, BlobStats
 	constexpr std::size_t kRing = kPeakRing;
 	const auto &ring = peakRing();
 	const int contrast = thresholder_.contrast();
+	/*
+	 * The test below, v >= median(ring) + contrast, holds exactly when more
+	 * than kRing / 2 samples lie at or below v - contrast: counted first, so
+	 * that the noise's many local maxima on a bright patch cost no sort.
+	 */
 	std::array<int, kRing> s{};
-	for (std::size_t k = 0; k < kRing; ++k)
+	std::size_t at_or_below = 0;
+	for (std::size_t k = 0; k < kRing; ++k) {
 		s[k] = image.at(x + ring[k][0], y + ring[k][1]);
+		at_or_below += s[k] <= v - contrast ? 1U : 0U;
+	}
+	if (at_or_below <= kRing / 2)
+		return;
 	std::array<int, kRing> sorted = s;
 	std::nth_element(sorted.begin(), sorted.begin() + kRing / 2, sorted.end());
 	const int base = sorted[kRing / 2];
