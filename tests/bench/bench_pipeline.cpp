@@ -14,7 +14,6 @@
  * faster than tracking that reads the whole frame.
  */
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <map>
 #include <string>
@@ -27,6 +26,7 @@
 #include "algo/io/model_json.h"
 #include "algo/pipeline.h"
 #include "algo/synth/renderer.h"
+#include "tests/bench/fresh_frame.h"
 #include "tests/bench/ratio_reporter.h"
 
 using namespace dockpose;
@@ -72,34 +72,13 @@ const Fixture &fixture()
 	return f;
 }
 
-/* Flushes `img` from every cache (a frame fresh from the camera), then times body(): seconds. */
-template<typename Body>
-double fresh(const Image &img, Body &&body)
-{
-	const std::uint8_t *p = img.data();
-	const std::size_t n = static_cast<std::size_t>(img.width()) * img.height();
-#if defined(__x86_64__)
-	for (std::size_t k = 0; k < n; k += 64)
-		__builtin_ia32_clflush(p + k);
-	__builtin_ia32_mfence();
-#elif defined(__aarch64__)
-	for (std::size_t k = 0; k < n; k += 64)
-		asm volatile("dc civac, %0" : : "r"(p + k) : "memory");
-	asm volatile("dsb sy" : : : "memory");
-#endif
-	const auto t0 = std::chrono::steady_clock::now();
-	body();
-	const auto t1 = std::chrono::steady_clock::now();
-	return std::chrono::duration<double>(t1 - t0).count();
-}
-
 void readFloor(benchmark::State &state)
 {
 	const Fixture &f = fixture();
 	std::size_t i = 0;
 	for (auto _ : state) {
 		const Image &img = f.frames[i++ % f.frames.size()];
-		state.SetIterationTime(fresh(img, [&img] {
+		state.SetIterationTime(bench::fresh(img, [&img] {
 			const std::uint8_t *p = img.data();
 			const std::size_t n = static_cast<std::size_t>(img.width()) * img.height();
 			/* Byte sums in 32-bit lanes: the compiler vectorises this into a pure streaming read. */
@@ -130,7 +109,8 @@ void track(benchmark::State &state, int full_frame_every)
 	for (auto _ : state) {
 		const Image &img = approachFrame(f, i++);
 		const PoseResult *r = nullptr;
-		state.SetIterationTime(fresh(img, [&] { r = &pipeline.process(img.view()); }));
+		state.SetIterationTime(
+			bench::fresh(img, [&] { r = &pipeline.process(img.view()); }));
 		found += r->found;
 		windowed += r->windows > 0;
 		++n;
@@ -163,7 +143,7 @@ void pipelineColdSearch(benchmark::State &state)
 	for (auto _ : state) {
 		const Image &img = f.frames[i++ % f.frames.size()];
 		const PoseResult *r = nullptr;
-		state.SetIterationTime(fresh(img, [&] {
+		state.SetIterationTime(bench::fresh(img, [&] {
 			pipeline.reset();
 			r = &pipeline.process(img.view());
 		}));
@@ -186,7 +166,7 @@ void openCvPipeline(benchmark::State &state)
 	for (auto _ : state) {
 		const std::size_t k = i++ % f.frames.size();
 		const Image &img = f.frames[k];
-		state.SetIterationTime(fresh(img, [&] {
+		state.SetIterationTime(bench::fresh(img, [&] {
 			const cv::Mat frame(img.height(), img.width(), CV_8UC1,
 					    const_cast<std::uint8_t *>(img.data()));
 			cv::threshold(frame, binary, 60, 255, cv::THRESH_BINARY);
