@@ -56,6 +56,13 @@ inline bool anyAtLeast(U8x16 v, U8x16 level)
 	return (m[0] | m[1]) != 0;
 }
 
+/* Whether every byte of v is >= the byte of level. */
+inline bool allAtLeast(U8x16 v, U8x16 level)
+{
+	const U64x2 m = std::bit_cast<U64x2>(v >= level);
+	return (m[0] & m[1]) == ~std::uint64_t{ 0 };
+}
+
 /*
  * Bit i set where byte i of v is >= the byte of level. Portable (no movemask
  * on NEON): each 0x00/0xff byte keeps a distinct bit, and one multiply adds
@@ -341,6 +348,8 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 	const int map_rows = map.rows() > 0 ? map.rows() : 1;
 	const int tile = map.cols() > 0 ? map.tilePx() : kMaxFrameSide;
 	const int blocks = (wx1 - wx0) / 64;
+	/* The clip level in every byte (clip_level 256: nothing clips, never compared). */
+	const U8x16 clip16 = splat16(static_cast<std::uint8_t>(std::min(clip_level, 255)));
 
 	Run *prev = runs_a.data();
 	Run *cur = runs_b.data();
@@ -517,10 +526,91 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 			rx1 = x;
 		};
 
+		/*
+		 * pixel() for the 16 pixels from x, all segmented and all or none
+		 * clipped (a bright patch's or a bloom's inside): the same sums, taken
+		 * about x in 32 bits (w d^2 <= 256 * 15^2 per pixel) and moved to the
+		 * frame's origin once.
+		 */
+		auto sixteen = [&](int x, bool clipped) {
+			if (open && x - rx1 - 1 <= fill_gap) {
+				area += static_cast<std::uint32_t>(x + 15 - rx1);
+			} else {
+				if (open)
+					close_run();
+				open = true;
+				rx0 = x;
+				area = 16;
+				sw = swx = swxx = 0;
+				peak = 0;
+				nn = ns = 0;
+				sx = sxx = ssx = ssxx = 0;
+				st = stx = 0;
+				lmin = 255;
+			}
+			std::uint32_t cw = 0, cwd = 0, cwdd = 0, ct = 0, ctd = 0;
+			std::uint8_t cpeak = 0, clmin = 255;
+			for (std::uint32_t d = 0; d < 16; ++d) {
+				const std::uint8_t v = p[x + static_cast<int>(d)];
+				const std::uint8_t t = lrow[x + static_cast<int>(d)];
+				const std::uint32_t w = std::uint32_t{ v } - t + 1U;
+				cw += w;
+				cwd += w * d;
+				cwdd += w * d * d;
+				ct += t;
+				ctd += std::uint32_t{ t } * d;
+				cpeak = std::max(cpeak, v);
+				clmin = std::min(clmin, t);
+			}
+			const auto ux = static_cast<std::uint64_t>(x);
+			sw += cw;
+			swx += ux * cw + cwd;
+			swxx += ux * ux * cw + 2U * ux * cwd + cwdd;
+			st += ct;
+			stx += ux * ct + ctd;
+			peak = std::max(peak, cpeak);
+			lmin = std::min(lmin, clmin);
+			/* sum d = 120, sum d^2 = 1240 over d = 0 .. 15 */
+			const std::uint64_t run_x = 16U * ux + 120U;
+			const std::uint64_t run_xx = 16U * ux * ux + 240U * ux + 1240U;
+			if (clipped) {
+				if (ns == 0)
+					sx0 = x;
+				ns += 16;
+				ssx += run_x;
+				ssxx += run_xx;
+				sx1 = x + 15;
+			} else {
+				nn += 16;
+				sx += run_x;
+				sxx += run_xx;
+			}
+			rx1 = x + 15;
+		};
+		/*
+		 * Every byte of v (16 pixels) segmented against level, and either
+		 * none or all of them clipped (sixteen()'s `clipped`).
+		 */
+		auto whole = [&](U8x16 v, U8x16 level, bool *clipped) {
+			if (!allAtLeast(v, level))
+				return false;
+			if (clip_level > 255 || !anyAtLeast(v, clip16)) {
+				*clipped = false;
+				return true;
+			}
+			*clipped = true;
+			return allAtLeast(v, clip16);
+		};
+
 		/* The segmented pixels of the 16 bytes v read at x (most such reads have none). */
 		auto hits = [&](int x, U8x16 v, U8x16 level, int skip = 0) {
 			if (!anyAtLeast(v, level))
 				return;
+			bool clipped = false;
+			if (skip == 0 && whole(v, level, &clipped)) {
+				sixteen(x, clipped);
+				return;
+			}
 			std::uint32_t mask = atLeastMask(v, level) >> skip << skip;
 			for (; mask != 0; mask &= mask - 1) {
 				const int xi = x + std::countr_zero(mask);
@@ -543,14 +633,18 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 			const U8x16 d = load16(p + x + 48);
 			if (!anyAtLeast(max16(max16(a, b), max16(c, d)), blv[k]))
 				continue;
-			if (anyAtLeast(a, load16(lrow + x)))
-				scalar(x, x + 16);
-			if (anyAtLeast(b, load16(lrow + x + 16)))
-				scalar(x + 16, x + 32);
-			if (anyAtLeast(c, load16(lrow + x + 32)))
-				scalar(x + 32, x + 48);
-			if (anyAtLeast(d, load16(lrow + x + 48)))
-				scalar(x + 48, x + 64);
+			const U8x16 chunks[4] = { a, b, c, d };
+			for (int q = 0; q < 4; ++q) {
+				const int xq = x + 16 * q;
+				const U8x16 lq = load16(lrow + xq);
+				if (!anyAtLeast(chunks[q], lq))
+					continue;
+				bool clipped = false;
+				if (whole(chunks[q], lq, &clipped))
+					sixteen(xq, clipped);
+				else
+					scalar(xq, xq + 16);
+			}
 		}
 		for (; x + 16 <= wx1; x += 16)
 			hits(x, load16(p + x), load16(lrow + x));
