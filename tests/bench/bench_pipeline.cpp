@@ -48,8 +48,8 @@ const Fixture &fixture()
 		x.target = loadTargetModel(data + "/wedge.json").value();
 		x.camera = loadCameraIntrinsics(data + "/cam1456.json").value();
 		FrameRenderer renderer(x.target, x.camera);
-		/* A slow approach: consecutive frames differ as at camera rate, and 32 frames
-		 * (50 MB) do not fit in any cache, as frames fresh from the camera. */
+		/* A slow approach: consecutive frames differ as at camera rate (each is flushed
+		 * from the caches before it is processed: bench::fresh()). */
 		for (int i = 0; i < 32; ++i) {
 			RenderOptions o;
 			o.reflections = 6;
