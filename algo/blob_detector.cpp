@@ -485,23 +485,30 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 			cur[ncur++] = Run{ rx0, rx1, root };
 		};
 
-		auto pixel = [&](int x, std::uint8_t v, std::uint8_t level) {
+		/*
+		 * The n segmented pixels from x join the open run (across a gap of
+		 * at most fill_gap: the gap counts in its area) or open a new one.
+		 */
+		auto take = [&](int x, int n) {
 			if (open && x - rx1 - 1 <= fill_gap) {
-				/* the gap and this pixel */
-				area += static_cast<std::uint32_t>(x - rx1);
-			} else {
-				if (open)
-					close_run();
-				open = true;
-				rx0 = x;
-				area = 1;
-				sw = swx = swxx = 0;
-				peak = 0;
-				nn = ns = 0;
-				sx = sxx = ssx = ssxx = 0;
-				st = stx = 0;
-				lmin = 255;
+				area += static_cast<std::uint32_t>(x + n - 1 - rx1);
+				return;
 			}
+			if (open)
+				close_run();
+			open = true;
+			rx0 = x;
+			area = static_cast<std::uint32_t>(n);
+			sw = swx = swxx = 0;
+			peak = 0;
+			nn = ns = 0;
+			sx = sxx = ssx = ssxx = 0;
+			st = stx = 0;
+			lmin = 255;
+		};
+
+		auto pixel = [&](int x, std::uint8_t v, std::uint8_t level) {
+			take(x, 1);
 			const std::uint64_t w = std::uint64_t{ v } - level + 1; /* v >= level */
 			const std::uint64_t ux = static_cast<std::uint64_t>(x);
 			sw += w;
@@ -533,21 +540,7 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 		 * frame's origin once.
 		 */
 		auto sixteen = [&](int x, bool clipped) {
-			if (open && x - rx1 - 1 <= fill_gap) {
-				area += static_cast<std::uint32_t>(x + 15 - rx1);
-			} else {
-				if (open)
-					close_run();
-				open = true;
-				rx0 = x;
-				area = 16;
-				sw = swx = swxx = 0;
-				peak = 0;
-				nn = ns = 0;
-				sx = sxx = ssx = ssxx = 0;
-				st = stx = 0;
-				lmin = 255;
-			}
+			take(x, 16);
 			std::uint32_t cw = 0, cwd = 0, cwdd = 0, ct = 0, ctd = 0;
 			std::uint8_t cpeak = 0, clmin = 255;
 			for (std::uint32_t d = 0; d < 16; ++d) {
