@@ -8,6 +8,7 @@
  */
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -206,6 +207,55 @@ TEST_F(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
 	}
 	EXPECT_GE(found, n - 3);
 	EXPECT_GE(windowed, found * 8 / 10);
+}
+
+/*
+ * A stationary glint that a window's side cuts (bench_pipeline's approach,
+ * played forth, back and forth: at a reversal the windows sit where the target
+ * has not been): the window is widened to the glint's reach and the frame
+ * stays windowed, with the whole frame's pose. Before windows were widened,
+ * that frame was read whole.
+ */
+TEST_F(EndToEndTracking, AWindowThatCutsASpotIsWidenedNotGivenUp)
+{
+	FrameRenderer renderer(target.value(), camera.value());
+	std::vector<Image> frames(32);
+	std::vector<Pose> truths;
+	for (int i = 0; i < 32; ++i) {
+		RenderOptions o;
+		o.reflections = 6;
+		o.glints = 2;
+		o.hot_pixels = 20;
+		o.noise_sigma = 2.0;
+		o.gradient = 20.0;
+		o.clutter_seed = 77;
+		truths.push_back(poseAt(camera.value(), target.value(), 1200.0 - 10.0 * i,
+					{ 8.0 - 0.2 * i, -10.0 + 0.3 * i, 5.0 }, 0.45 + 0.002 * i,
+					0.5));
+		renderer.render(truths.back(), o, 1000 + i, &frames[static_cast<std::size_t>(i)]);
+	}
+	PipelineConfig windows_config;
+	windows_config.full_frame_every = 1 << 30;
+	PipelineConfig whole_config;
+	whole_config.full_frame_every = 1;
+	Pipeline windows(target.value(), camera.value(), windows_config);
+	Pipeline whole(target.value(), camera.value(), whole_config);
+	int windowed = 0;
+	/* Forth, back and forth again: both reversals. */
+	for (int i = 0; i < 96; ++i) {
+		const int k = i % 64 < 32 ? i % 64 : 63 - i % 64;
+		const ImageView view = frames[static_cast<std::size_t>(k)].view();
+		const PoseResult a = windows.process(view);
+		const PoseResult &b = whole.process(view);
+		ASSERT_TRUE(a.found && b.found) << "frame " << i;
+		EXPECT_TRUE(correctPose(truths[static_cast<std::size_t>(k)], a)) << "frame " << i;
+		for (int j = 0; j < 3; ++j)
+			EXPECT_LE(std::abs(a.t_mm[j] - b.t_mm[j]), 0.5 * b.sigma_t_mm[j] + 1e-6)
+				<< "frame " << i << " axis " << j;
+		windowed += a.windows > 0 ? 1 : 0;
+	}
+	/* Every frame after the first from windows. */
+	EXPECT_EQ(windowed, 95);
 }
 
 /* After readWhole(n) the next n frames are read whole, then windows again. */
