@@ -1522,19 +1522,15 @@ bool BlobDetector::overlapsBlob(const BlobMoments &m,
 }
 
 /*
- * Does a component touch a side of `window` that lies inside the frame (so
- * that it may go on beyond the window)? Allocates: never.
- */
-/*
  * BlobStats::cut_reach of a component: grow()'s search box around it, and
  * where `window` (when the labelling cut it, not grow()) has a side through
- * it, as far again as the largest spot grow() measures.
+ * it, as far again as the largest spot grow() measures. Allocates: never.
  */
 PixelWindow BlobDetector::cutReach(const BlobMoments &m, const PixelWindow *window,
 				   const ImageView &image)
 {
-	auto beyond = [window](bool side_cut) {
-		return kGrowMargin + (window && side_cut ? kGrowMaxBox : 0);
+	auto beyond = [](bool side_cut) {
+		return kGrowMargin + (side_cut ? kGrowMaxBox : 0);
 	};
 	const bool cut_x0 = window && m.x_min == window->x0;
 	const bool cut_x1 = window && m.x_max + 1 == window->x1;
@@ -1546,6 +1542,10 @@ PixelWindow BlobDetector::cutReach(const BlobMoments &m, const PixelWindow *wind
 			    std::min(image.height, m.y_max + 1 + beyond(cut_y1)) };
 }
 
+/*
+ * Does a component touch a side of `window` that lies inside the frame (so
+ * that it may go on beyond the window)? Allocates: never.
+ */
 bool BlobDetector::cutByWindow(const BlobMoments &m, const PixelWindow &window,
 			       const ImageView &image)
 {

@@ -74,9 +74,10 @@ struct PipelineConfig {
 	 * full_frame_every-th frame the whole frame, to re-measure the
 	 * background, the noise and the clutter density that acceptance uses.
 	 * A window whose side cuts a spot (clutter at its edge, a seam between
-	 * two) is widened to hold that spot and read again, up to 3 times; a
-	 * frame whose windows still fail (a spot cut, too few blobs, no tracked
-	 * match) is read whole at once, as without windows.
+	 * two) is widened to hold that spot and read again, a few times
+	 * (Pipeline::kMaxWidenings); a frame whose windows still fail (a spot
+	 * cut, too few blobs, no tracked match) is read whole at once, as
+	 * without windows.
 	 * 1: the whole frame every frame.
 	 *
 	 * A window is centred where the LED's last image motion carries it

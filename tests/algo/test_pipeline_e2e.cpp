@@ -16,6 +16,7 @@
 #include "algo/pipeline.h"
 #include "algo/synth/evaluation.h"
 #include "tests/algo/fixtures.h"
+#include "tests/algo/slow_approach.h"
 
 using namespace dockpose;
 
@@ -219,21 +220,11 @@ TEST_F(EndToEndTracking, RegionsOfInterestGiveTheWholeFramesPoses)
 TEST_F(EndToEndTracking, AWindowThatCutsASpotIsWidenedNotGivenUp)
 {
 	FrameRenderer renderer(target.value(), camera.value());
-	std::vector<Image> frames(32);
+	std::vector<Image> frames(test::kSlowApproachFrames);
 	std::vector<Pose> truths;
-	for (int i = 0; i < 32; ++i) {
-		RenderOptions o;
-		o.reflections = 6;
-		o.glints = 2;
-		o.hot_pixels = 20;
-		o.noise_sigma = 2.0;
-		o.gradient = 20.0;
-		o.clutter_seed = 77;
-		truths.push_back(poseAt(camera.value(), target.value(), 1200.0 - 10.0 * i,
-					{ 8.0 - 0.2 * i, -10.0 + 0.3 * i, 5.0 }, 0.45 + 0.002 * i,
-					0.5));
-		renderer.render(truths.back(), o, 1000 + i, &frames[static_cast<std::size_t>(i)]);
-	}
+	for (int i = 0; i < test::kSlowApproachFrames; ++i)
+		truths.push_back(test::renderSlowApproach(renderer, camera.value(), target.value(),
+							  i, &frames[static_cast<std::size_t>(i)]));
 	PipelineConfig windows_config;
 	windows_config.full_frame_every = 1 << 30;
 	PipelineConfig whole_config;
@@ -242,13 +233,13 @@ TEST_F(EndToEndTracking, AWindowThatCutsASpotIsWidenedNotGivenUp)
 	Pipeline whole(target.value(), camera.value(), whole_config);
 	int windowed = 0;
 	/* Forth, back and forth again: both reversals. */
-	for (int i = 0; i < 96; ++i) {
-		const int k = i % 64 < 32 ? i % 64 : 63 - i % 64;
-		const ImageView view = frames[static_cast<std::size_t>(k)].view();
+	for (std::size_t i = 0; i < 96; ++i) {
+		const std::size_t k = test::backAndForth(i);
+		const ImageView view = frames[k].view();
 		const PoseResult a = windows.process(view);
 		const PoseResult &b = whole.process(view);
 		ASSERT_TRUE(a.found && b.found) << "frame " << i;
-		EXPECT_TRUE(correctPose(truths[static_cast<std::size_t>(k)], a)) << "frame " << i;
+		EXPECT_TRUE(correctPose(truths[k], a)) << "frame " << i;
 		for (int j = 0; j < 3; ++j)
 			EXPECT_LE(std::abs(a.t_mm[j] - b.t_mm[j]), 0.5 * b.sigma_t_mm[j] + 1e-6)
 				<< "frame " << i << " axis " << j;

@@ -26,6 +26,7 @@
 #include "algo/io/model_json.h"
 #include "algo/pipeline.h"
 #include "algo/synth/renderer.h"
+#include "tests/algo/slow_approach.h"
 #include "tests/bench/fresh_frame.h"
 #include "tests/bench/ratio_reporter.h"
 
@@ -48,22 +49,12 @@ const Fixture &fixture()
 		x.target = loadTargetModel(data + "/wedge.json").value();
 		x.camera = loadCameraIntrinsics(data + "/cam1456.json").value();
 		FrameRenderer renderer(x.target, x.camera);
-		/* A slow approach: consecutive frames differ as at camera rate (each is flushed
-		 * from the caches before it is processed: bench::fresh()). */
-		for (int i = 0; i < 32; ++i) {
-			RenderOptions o;
-			o.reflections = 6;
-			o.glints = 2;
-			o.hot_pixels = 20;
-			o.noise_sigma = 2.0;
-			o.gradient = 20.0;
-			o.clutter_seed = 77; /* the scene stays where it is; the target moves */
+		/* Consecutive frames differ as at camera rate (each is flushed from the caches
+		 * before it is processed: bench::fresh()). */
+		for (int i = 0; i < test::kSlowApproachFrames; ++i) {
 			RenderTruth truth;
 			Image img;
-			renderer.render(poseAt(x.camera, x.target, 1200.0 - 10.0 * i,
-					       { 8.0 - 0.2 * i, -10.0 + 0.3 * i, 5.0 },
-					       0.45 + 0.002 * i, 0.5),
-					o, 1000 + i, &img, &truth);
+			test::renderSlowApproach(renderer, x.camera, x.target, i, &img, &truth);
 			x.frames.push_back(std::move(img));
 			x.truths.push_back(truth);
 		}
@@ -90,14 +81,6 @@ void readFloor(benchmark::State &state)
 	}
 }
 
-/* Frame k of the approach, back and forth (0..31, 31..0, ...): a steady track never jumps. */
-const Image &approachFrame(const Fixture &f, std::size_t i)
-{
-	const std::size_t n = f.frames.size();
-	const std::size_t k = i % (2 * n);
-	return f.frames[k < n ? k : 2 * n - 1 - k];
-}
-
 /* Steady-state tracking, with the configuration's regions of interest or the whole frame every frame. */
 void track(benchmark::State &state, int full_frame_every)
 {
@@ -107,7 +90,7 @@ void track(benchmark::State &state, int full_frame_every)
 	Pipeline pipeline(f.target, f.camera, config);
 	std::size_t i = 0, found = 0, windowed = 0, n = 0;
 	for (auto _ : state) {
-		const Image &img = approachFrame(f, i++);
+		const Image &img = f.frames[test::backAndForth(i++)];
 		const PoseResult *r = nullptr;
 		state.SetIterationTime(
 			bench::fresh(img, [&] { r = &pipeline.process(img.view()); }));

@@ -17,22 +17,30 @@
 
 namespace dockpose::bench {
 
-/* Writes back and drops every cache line of img's pixels. */
+/* Writes back and drops every cache line that holds a byte of img's pixels. */
 inline void evict(const Image &img)
 {
-	const std::uint8_t *p = img.data();
+	constexpr std::uintptr_t kLine = 64;
 	const std::size_t n = static_cast<std::size_t>(img.width()) * img.height();
+	if (n == 0)
+		return;
+	/* From the line of the first byte to the line of the last (the pixels need not start one). */
+	const std::uintptr_t first = reinterpret_cast<std::uintptr_t>(img.data()) & ~(kLine - 1);
+	const std::uintptr_t last = reinterpret_cast<std::uintptr_t>(img.data() + n - 1);
+	for (std::uintptr_t a = first; a <= last; a += kLine) {
+		const auto *line = reinterpret_cast<const void *>(a);
 #if defined(__x86_64__)
-	for (std::size_t k = 0; k < n; k += 64)
-		__builtin_ia32_clflush(p + k);
+		__builtin_ia32_clflush(line);
+#elif defined(__aarch64__)
+		asm volatile("dc civac, %0" : : "r"(line) : "memory");
+#else
+		(void)line;
+#endif
+	}
+#if defined(__x86_64__)
 	__builtin_ia32_mfence();
 #elif defined(__aarch64__)
-	for (std::size_t k = 0; k < n; k += 64)
-		asm volatile("dc civac, %0" : : "r"(p + k) : "memory");
 	asm volatile("dsb sy" : : : "memory");
-#else
-	(void)p;
-	(void)n;
 #endif
 }
 
