@@ -255,7 +255,7 @@ struct BlobDetector::Impl {
 		  runs_b(static_cast<std::size_t>(max_w) / 2 + 2),
 		  level_row(static_cast<std::size_t>(max_w) + 64),
 		  block_level(static_cast<std::size_t>(max_w) / 64 + 1),
-		  grow_seen(static_cast<std::size_t>(kGrowSide) * kGrowSide),
+		  grow_low(static_cast<std::size_t>(kGrowSide) * kGrowSide),
 		  grow_stack(4 * static_cast<std::size_t>(kGrowSide) * kGrowSide)
 	{
 	}
@@ -323,8 +323,8 @@ struct BlobDetector::Impl {
 	/* The level of every pixel of the current tile row; the lowest level of each 64-byte block. */
 	std::vector<std::uint8_t> level_row;
 	std::vector<U8x16> block_level;
-	/* grow(): the pixels of its area taken, and its span fill's seeds (x | y << 16). */
-	std::vector<std::uint8_t> grow_seen;
+	/* grow(): its area's low levels, kGrowSide per tile row; its span fill's seeds (x | y << 16). */
+	std::vector<std::uint8_t> grow_low;
 	std::vector<std::uint32_t> grow_stack;
 	std::size_t labels = 0;
 	std::size_t components = 0;
@@ -1068,37 +1068,75 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		return (reached[0] && margin_side[0]) || (reached[1] && margin_side[1]) ||
 		       (reached[2] && margin_side[2]) || (reached[3] && margin_side[3]);
 	};
-	auto index = [&](int x, int y) {
-		return static_cast<std::size_t>(y - y0) * side_x + static_cast<std::size_t>(x - x0);
-	};
 	/*
-	 * Each pixel's tile, stepped along the area's columns and rows (a flood
-	 * reads a pixel's level up to nine times: no division per read).
+	 * Each pixel's low level, per tile row of the area: a tile row's levels
+	 * written once, tile by tile, when the flood first reaches it.
 	 */
 	const bool tiled = map.cols() > 0;
-	const std::uint8_t untiled_level = map.levelAt(0, 0);
-	std::array<int, kGrowSide> tile_col{};
-	std::array<const std::uint8_t *, kGrowSide> tile_levels{};
-	{
-		const int tile = tiled ? map.tilePx() : kMaxFrameSide;
-		int c = tiled ? std::min(x0 / tile, map.cols() - 1) : 0;
-		for (int x = x0; x < x1; ++x) {
-			if (tiled && c < map.cols() - 1 && x >= (c + 1) * tile)
-				++c;
-			tile_col[static_cast<std::size_t>(x - x0)] = c;
-		}
-		int r = tiled ? std::min(y0 / tile, map.rows() - 1) : 0;
-		for (int y = y0; y < y1; ++y) {
-			if (tiled && r < map.rows() - 1 && y >= (r + 1) * tile)
-				++r;
-			tile_levels[static_cast<std::size_t>(y - y0)] = tiled ? map.rowLevels(r)
-									      : &untiled_level;
-		}
+	const int tile = tiled ? map.tilePx() : kMaxFrameSide;
+	const int first_tile_row = tiled ? std::min(y0 / tile, map.rows() - 1) : 0;
+	/* Per row of the area: its tile row, counted from the area's first. */
+	std::array<int, kGrowSide> row_tile;
+	for (int y = y0, r = first_tile_row; y < y1; ++y) {
+		if (tiled && r < map.rows() - 1 && y >= (r + 1) * tile)
+			++r;
+		row_tile[static_cast<std::size_t>(y - y0)] = r - first_tile_row;
 	}
-	auto low_level = [&](int x, int y) {
-		return std::max(0, tile_levels[static_cast<std::size_t>(y - y0)]
-					      [tile_col[static_cast<std::size_t>(x - x0)]] -
-					   delta);
+	std::uint8_t *low_levels = impl_->grow_low.data(); /* kGrowSide per tile row */
+	std::uint64_t low_written = 0; /* bit r: tile row r's low levels written */
+	auto low_row = [&](int y) {
+		const int r = row_tile[static_cast<std::size_t>(y - y0)];
+		std::uint8_t *lows = low_levels + static_cast<std::size_t>(r) * kGrowSide;
+		if (low_written >> r & 1U)
+			return lows;
+		low_written |= std::uint64_t{ 1 } << r;
+		auto low_of = [&](int level) {
+			return static_cast<std::uint8_t>(std::max(0, level - delta));
+		};
+		if (!tiled) {
+			std::memset(lows, low_of(map.levelAt(0, 0)),
+				    static_cast<std::size_t>(side_x));
+			return lows;
+		}
+		const std::uint8_t *levels = map.rowLevels(first_tile_row + r);
+		for (int c = std::min(x0 / tile, map.cols() - 1), xa = x0; xa < x1; ++c) {
+			const int xb = c == map.cols() - 1 ? x1 : std::min(x1, (c + 1) * tile);
+			std::memset(lows + (xa - x0), low_of(levels[c]),
+				    static_cast<std::size_t>(xb - xa));
+			xa = xb;
+		}
+		return lows;
+	};
+	/*
+	 * Per row of the area (at most kGrowSide wide: one bit per column), its
+	 * pixels at or above the low level, computed when the flood first reads
+	 * the row (16 at a time), and those the flood has taken.
+	 */
+	std::array<std::uint64_t, kGrowSide> above;
+	std::array<std::uint64_t, kGrowSide> taken;
+	std::fill_n(taken.begin(), y1 - y0, std::uint64_t{ 0 });
+	std::uint64_t above_read = 0; /* bit y - y0: that row's `above` computed */
+	auto above_low = [&](int y) {
+		const auto i = static_cast<std::size_t>(y - y0);
+		if (above_read >> i & 1U)
+			return above[i];
+		const std::uint8_t *row = image.row(y) + x0;
+		const std::uint8_t *lows = low_row(y);
+		auto bits16 = [&](int d) {
+			return std::uint64_t{ atLeastMask(load16(row + d), load16(lows + d)) } << d;
+		};
+		std::uint64_t bits = 0;
+		int d = 0;
+		for (; d + 16 <= side_x; d += 16)
+			bits |= bits16(d);
+		if (d < side_x && side_x >= 16) /* the last 16, overlapping those read */
+			bits |= bits16(side_x - 16);
+		else
+			for (; d < side_x; ++d)
+				bits |= std::uint64_t{ row[d] >= lows[d] } << d;
+		above[i] = bits;
+		above_read |= std::uint64_t{ 1 } << i;
+		return bits;
 	};
 
 	/* The seed: the component's peak pixel (the first at its value, at or above its level). */
@@ -1116,13 +1154,11 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		return Grow::Kept;
 
 	/*
-	 * A span fill: each row's run of pixels at or above the low level is
+	 * A span fill: each row's run of pixels at or above the lows level is
 	 * taken whole, and the runs of the rows above and below that touch it
-	 * (8-connected: one pixel beyond each end) are seeded. The same pixels
-	 * as a pixel-by-pixel flood, read about three times each instead of nine.
+	 * (8-connected: one pixel beyond each end) are seeded, a row's pixels
+	 * compared with their levels once, 16 at a time, into a bit per pixel.
 	 */
-	std::uint8_t *seen = impl_->grow_seen.data();
-	std::fill_n(seen, static_cast<std::size_t>(side_x) * (y1 - y0), std::uint8_t{ 0 });
 	std::uint32_t *stack = impl_->grow_stack.data();
 	const std::size_t stack_capacity = impl_->grow_stack.size();
 	std::size_t top = 0;
@@ -1137,40 +1173,41 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 	while (top > 0) {
 		const std::uint32_t p = stack[--top];
 		const int sx = static_cast<int>(p & 0xffff), y = static_cast<int>(p >> 16);
-		if (seen[index(sx, y)])
+		const auto yi = static_cast<std::size_t>(y - y0);
+		const int b = sx - x0;
+		if (taken[yi] >> b & 1U)
 			continue;
-		const std::uint8_t *row = image.row(y);
-		/* The run through the seed (none of it seen: a run is always taken whole). */
-		int xl = sx, xr = sx;
-		while (xl > x0 && row[xl - 1] >= low_level(xl - 1, y))
-			--xl;
-		while (xr < x1 - 1 && row[xr + 1] >= low_level(xr + 1, y))
-			++xr;
+		/* The run through the seed (at or above the lows level; none of it taken yet). */
+		const std::uint64_t bits = above_low(y);
+		const int xr = sx + std::countr_one(bits >> b) - 1;
+		const int xl = sx - std::countl_one(bits << (63 - b)) + 1;
+		const int run_px = xr - xl + 1;
+		taken[yi] |=
+			(run_px == 64 ? ~std::uint64_t{ 0 } : ((std::uint64_t{ 1 } << run_px) - 1U))
+			<< (xl - x0);
 		/*
 		 * The run's sums about its first pixel in 32 bits (a run is at most
 		 * kGrowSide long: w dx^2 <= 256 * 63^2 per pixel), moved to the frame's
 		 * origin once per run: the same integers as summing x, x^2 per pixel.
 		 */
+		const std::uint8_t *row = image.row(y) + xl;
+		const std::uint8_t *lows = low_row(y) + (xl - x0);
 		std::uint32_t rw = 0, rwd = 0, rwdd = 0, rt = 0, rtd = 0;
 		std::uint8_t rpeak = 0;
-		int rlmin = 255;
-		std::uint8_t *seen_row = seen + index(xl, y);
-		for (int x = xl; x <= xr; ++x) {
-			const auto d = static_cast<std::uint32_t>(x - xl);
-			seen_row[d] = 1;
-			const std::uint8_t v = row[x];
-			const int t = low_level(x, y);
-			const std::uint32_t w =
-				static_cast<std::uint32_t>(v) + 1U - static_cast<std::uint32_t>(t);
+		std::uint8_t rlmin = 255;
+		for (int di = 0; di < run_px; ++di) {
+			const auto d = static_cast<std::uint32_t>(di);
+			const std::uint8_t v = row[di];
+			const std::uint8_t t = lows[di];
+			const std::uint32_t w = std::uint32_t{ v } + 1U - t;
 			rw += w;
 			rwd += w * d;
 			rwdd += w * d * d;
-			rt += static_cast<std::uint32_t>(t);
-			rtd += static_cast<std::uint32_t>(t) * d;
+			rt += t;
+			rtd += std::uint32_t{ t } * d;
 			rpeak = std::max(rpeak, v);
 			rlmin = std::min(rlmin, t);
 		}
-		const int run_px = xr - xl + 1;
 		const auto n64 = static_cast<std::uint64_t>(run_px);
 		const std::uint64_t ux = static_cast<std::uint64_t>(xl),
 				    uy = static_cast<std::uint64_t>(y);
@@ -1194,7 +1231,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		g.sum_t += rt;
 		g.sum_tx += ux * rt + rtd;
 		g.sum_ty += uy * rt;
-		g.level_min = std::min<std::uint8_t>(g.level_min, static_cast<std::uint8_t>(rlmin));
+		g.level_min = std::min(g.level_min, rlmin);
 		g.peak = std::max(g.peak, rpeak);
 		const auto n = static_cast<std::uint32_t>(run_px);
 		g.area += n;
@@ -1215,26 +1252,29 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		 */
 		if (!any_window_side && margin_reached(edge))
 			return Grow::Kept;
-		/* Seed each run of the rows above and below that touches this one. */
+		/*
+		 * Seed each run of the rows above and below that touches this one:
+		 * the first pixel of each run of untaken pixels at or above the lows
+		 * level in [xl - 1, xr + 1], left to right.
+		 */
+		const int lo = std::max(0, xl - 1 - x0), hi = std::min(side_x - 1, xr + 1 - x0);
+		const std::uint64_t span = (~std::uint64_t{ 0 } >> (63 - hi)) &
+					   (~std::uint64_t{ 0 } << lo);
 		for (int ny = y - 1; ny <= y + 1; ny += 2) {
 			if (ny < y0 || ny >= y1)
 				continue;
-			const std::uint8_t *nrow = image.row(ny);
-			bool in_run = false;
-			for (int x = std::max(x0, xl - 1); x <= std::min(x1 - 1, xr + 1); ++x) {
-				const bool take = !seen[index(x, ny)] &&
-						  nrow[x] >= low_level(x, ny);
-				if (take && !in_run) {
-					/*
-					 * Seeds: a few per run at most (its rows' neighbouring
-					 * runs), the stack four per pixel of the area; a pattern
-					 * that would need more keeps the component's measurement.
-					 */
-					if (top == stack_capacity)
-						return Grow::Kept;
-					push(x, ny);
-				}
-				in_run = take;
+			const std::uint64_t open = above_low(ny) &
+						   ~taken[static_cast<std::size_t>(ny - y0)] & span;
+			for (std::uint64_t starts = open & ~(open << 1); starts != 0;
+			     starts &= starts - 1) {
+				/*
+				 * Seeds: a few per run at most (its rows' neighbouring
+				 * runs), the stack four per pixel of the area; a pattern
+				 * that would need more keeps the component's measurement.
+				 */
+				if (top == stack_capacity)
+					return Grow::Kept;
+				push(x0 + std::countr_zero(starts), ny);
 			}
 		}
 	}
