@@ -1154,7 +1154,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		return Grow::Kept;
 
 	/*
-	 * A span fill: each row's run of pixels at or above the lows level is
+	 * A span fill: each row's run of pixels at or above the low level is
 	 * taken whole, and the runs of the rows above and below that touch it
 	 * (8-connected: one pixel beyond each end) are seeded, a row's pixels
 	 * compared with their levels once, 16 at a time, into a bit per pixel.
@@ -1177,7 +1177,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 		const int b = sx - x0;
 		if (taken[yi] >> b & 1U)
 			continue;
-		/* The run through the seed (at or above the lows level; none of it taken yet). */
+		/* The run through the seed (at or above the low level; none of it taken yet). */
 		const std::uint64_t bits = above_low(y);
 		const int xr = sx + std::countr_one(bits >> b) - 1;
 		const int xl = sx - std::countl_one(bits << (63 - b)) + 1;
@@ -1254,7 +1254,7 @@ BlobDetector::Grow BlobDetector::grow(const ImageView &image, const BlobMoments 
 			return Grow::Kept;
 		/*
 		 * Seed each run of the rows above and below that touches this one:
-		 * the first pixel of each run of untaken pixels at or above the lows
+		 * the first pixel of each run of untaken pixels at or above the low
 		 * level in [xl - 1, xr + 1], left to right.
 		 */
 		const int lo = std::max(0, xl - 1 - x0), hi = std::min(side_x - 1, xr + 1 - x0);
