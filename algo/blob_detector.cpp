@@ -260,8 +260,9 @@ struct BlobDetector::Impl {
 	{
 	}
 
+	/* `next`: the window read after this one, whose first rows the last rows prefetch. */
 	bool label(const ImageView &image, const ThresholdMap &map, int fill_gap, int clip_level,
-		   const PixelWindow &window);
+		   const PixelWindow &window, const PixelWindow *next = nullptr);
 
 	std::uint32_t find(std::uint32_t x)
 	{
@@ -332,7 +333,7 @@ struct BlobDetector::Impl {
 };
 
 bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, int fill_gap,
-			       int clip_level, const PixelWindow &window)
+			       int clip_level, const PixelWindow &window, const PixelWindow *next)
 {
 	labels = 0;
 	components = 0;
@@ -364,9 +365,12 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 	 * A narrow window reads a short piece of many rows, each in another
 	 * cache line (and often another page) of a frame fresh from the camera:
 	 * the hardware prefetcher does not follow, so the rows ahead are
-	 * prefetched (without, reading the windows was bound by memory latency).
+	 * prefetched (without, reading the windows was bound by memory latency),
+	 * past the window's last row into `next`'s first: the next labelling
+	 * finds them on their way.
 	 */
 	const bool prefetch = wx1 - wx0 <= 1024;
+	const bool prefetch_next = prefetch && next && next->x1 - next->x0 <= 1024;
 	const int ahead = std::min(kPrefetchRows, window.y1 - window.y0);
 	if (prefetch)
 		for (int y = window.y0; y < window.y0 + ahead; ++y)
@@ -377,6 +381,9 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 		const std::uint8_t *p = image.row(y);
 		if (prefetch && y + ahead < window.y1)
 			prefetchRow(image.row(y + ahead), wx0, wx1);
+		else if (prefetch_next && next->y0 + (y + ahead - window.y1) < next->y1)
+			prefetchRow(image.row(next->y0 + (y + ahead - window.y1)), next->x0,
+				    next->x1);
 		/* The tile row, stepped instead of divided for (a short window row costs little else). */
 		if (y >= next_tile_y) {
 			map_row = std::min(y / tile, map_rows - 1);
@@ -1006,12 +1013,18 @@ bool BlobDetector::detectWindows(const ImageView &image, const PixelWindow *wind
 	st->threshold = reference_threshold_;
 
 	const ThresholdMap &map = thresholder_.map();
+	auto inside = [&image](const PixelWindow &w) {
+		return w.x0 >= 0 && w.y0 >= 0 && w.x1 <= image.width && w.y1 <= image.height &&
+		       w.x0 < w.x1 && w.y0 < w.y1;
+	};
 	for (std::size_t i = 0; i < count; ++i) {
 		const PixelWindow &w = windows[i];
-		if (w.x0 < 0 || w.y0 < 0 || w.x1 > image.width || w.y1 > image.height ||
-		    w.x0 >= w.x1 || w.y0 >= w.y1)
+		if (!inside(w))
 			return false;
-		if (!impl_->label(image, map, filter_.fill_gap_px, filter_.clip_level, w)) {
+		/* The next window's first rows follow this one's last into the cache. */
+		const PixelWindow *next = i + 1 < count && inside(windows[i + 1]) ? &windows[i + 1]
+										  : nullptr;
+		if (!impl_->label(image, map, filter_.fill_gap_px, filter_.clip_level, w, next)) {
 			st->component_overflow = impl_->overflow;
 			return false;
 		}
