@@ -1428,18 +1428,100 @@ bool Correspondence::screenQuad(const QuadInvariant &inv, std::size_t f, const i
 }
 
 /*
- * Quadrilaterals of each candidate and three of its neighbours in `table`,
- * strongest anchors first, each set once (at the strongest member whose
- * neighbours hold the other three; sets `before`'s pass formed are skipped),
- * in convex position, screened against every face in its 8 assignments (the
- * invariant, once per quadrilateral, then quadShape()), and the survivors
- * solved and verified at once.
+ * One candidate set of four (positions in cand_): in convex position,
+ * screened against every face in its 8 assignments, the survivors solved and
+ * verified. Found: a pose stopped the search; Budget: a budget ran out first.
  */
-bool Correspondence::searchQuads(const NeighbourTable &table, const NeighbourTable *before)
+Correspondence::SetOutcome Correspondence::tryQuadSet(const int members[4])
 {
 	/* The triangles' share stays theirs (searchTriangles()). */
 	const int quad_budget = config_.max_hypotheses - std::min(config_.max_triangle_hypotheses,
 								  config_.max_hypotheses / 2);
+	if (hypotheses_ >= quad_budget || verified_ >= config_.max_verifications) {
+		budget_hit_ = true;
+		return SetOutcome::Budget;
+	}
+	const int idx[4] = { cand_[members[0]], cand_[members[1]], cand_[members[2]],
+			     cand_[members[3]] };
+	if (!inFocus(idx, 4))
+		return SetOutcome::Tried;
+	int order[4];
+	if (!convexOrder(xy_.data(), idx, order))
+		return SetOutcome::Tried;
+	Eigen::Vector2d q[4];
+	for (int k = 0; k < 4; ++k)
+		q[k] = xy_[order[k]];
+	QuadInvariant inv;
+	if (!quadInvariant(q, &inv))
+		return SetOutcome::Tried;
+	double D[4];
+	quadDeterminants(q, D);
+	for (std::size_t f = 0; f < target_.faces.size(); ++f)
+		for (int as = 0; as < 8; ++as) {
+			const QuadAssignment &qa =
+				quad_assignments_[f][static_cast<std::size_t>(as)];
+			/*
+			 * Seen from the front in one direction round only
+			 * (quadShape()'s sign rule, D/A < 0): the other four
+			 * assignments are no hypotheses.
+			 */
+			if (!(D[0] * qa.area[0] < 0.0) || !screenQuad(inv, f, qa.vertex.data()))
+				continue;
+			++hypotheses_;
+			if (quadShape(q, D, f, as) && tryAssignment(order, f, qa.vertex.data()))
+				return SetOutcome::Found;
+		}
+	return SetOutcome::Tried;
+}
+
+/*
+ * The quadrilaterals among the `pool` strongest candidates first, in the
+ * order of their weakest member (PROSAC's): every set of four of them that a
+ * pass of searchQuads() forms, no other (strongestTried()), and those passes
+ * skip them. The same hypotheses in another order: a target whose LEDs are
+ * among the strongest spots is found before every neighbour set of a strong
+ * reflection is tried.
+ */
+bool Correspondence::searchStrongestQuads(int pool)
+{
+	for (int w = 3; w < pool; ++w)
+		for (int a = 0; a < w; ++a)
+			for (int b = a + 1; b < w; ++b)
+				for (int c = b + 1; c < w; ++c) {
+					const std::uint64_t set = (std::uint64_t{ 1 } << a) |
+								  (std::uint64_t{ 1 } << b) |
+								  (std::uint64_t{ 1 } << c) |
+								  (std::uint64_t{ 1 } << w);
+					if (!strongestTried(set))
+						continue;
+					const int members[4] = { a, b, c, w };
+					const SetOutcome outcome = tryQuadSet(members);
+					if (outcome != SetOutcome::Tried)
+						return outcome == SetOutcome::Found;
+				}
+	return false;
+}
+
+/*
+ * Is the set one searchStrongestQuads() tries: among the strongest_
+ * candidates, and formed by the search over every candidate or by the
+ * clipped spots' own pass (when it runs)?
+ */
+bool Correspondence::strongestTried(std::uint64_t set) const
+{
+	return (set & ~strongest_) == 0 &&
+	       (formedIn(neighbours_, set, config_.neighbours) ||
+		(clipped_pass_ && formedIn(clipped_neighbours_, set, config_.neighbours)));
+}
+
+/*
+ * Quadrilaterals of each candidate and three of its neighbours in `table`,
+ * strongest anchors first, each set once (at the strongest member whose
+ * neighbours hold the other three; sets `before`'s pass formed are skipped,
+ * and those searchStrongestQuads() tried), through tryQuadSet().
+ */
+bool Correspondence::searchQuads(const NeighbourTable &table, const NeighbourTable *before)
+{
 	for (int a = 0; a < n_cand_; ++a) {
 		const int na = table.n[a];
 		const auto &nb = table.list[a];
@@ -1459,47 +1541,14 @@ bool Correspondence::searchQuads(const NeighbourTable &table, const NeighbourTab
 							  (table.bits[m[e]] & others) == others;
 					}
 					if (earlier ||
-					    (before && formedIn(*before, set, config_.neighbours)))
+					    (before &&
+					     formedIn(*before, set, config_.neighbours)) ||
+					    strongestTried(set))
 						continue;
-					if (hypotheses_ >= quad_budget ||
-					    verified_ >= config_.max_verifications) {
-						budget_hit_ = true;
-						return false;
-					}
-					const int idx[4] = { cand_[a], cand_[m[0]], cand_[m[1]],
-							     cand_[m[2]] };
-					if (!inFocus(idx, 4))
-						continue;
-					int order[4];
-					if (!convexOrder(xy_.data(), idx, order))
-						continue;
-					Eigen::Vector2d q[4];
-					for (int k = 0; k < 4; ++k)
-						q[k] = xy_[order[k]];
-					QuadInvariant inv;
-					if (!quadInvariant(q, &inv))
-						continue;
-					double D[4];
-					quadDeterminants(q, D);
-					for (std::size_t f = 0; f < target_.faces.size(); ++f)
-						for (int as = 0; as < 8; ++as) {
-							const QuadAssignment &qa = quad_assignments_
-								[f][static_cast<std::size_t>(as)];
-							/*
-							 * Seen from the front in one direction
-							 * round only (quadShape()'s sign rule,
-							 * D/A < 0): the other four assignments
-							 * are no hypotheses.
-							 */
-							if (!(D[0] * qa.area[0] < 0.0) ||
-							    !screenQuad(inv, f, qa.vertex.data()))
-								continue;
-							++hypotheses_;
-							if (quadShape(q, D, f, as) &&
-							    tryAssignment(order, f,
-									  qa.vertex.data()))
-								return true;
-						}
+					const int members[4] = { a, m[0], m[1], m[2] };
+					const SetOutcome outcome = tryQuadSet(members);
+					if (outcome != SetOutcome::Tried)
+						return outcome == SetOutcome::Found;
 				}
 	}
 	return false;
@@ -1691,6 +1740,7 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 						: (std::uint64_t{ 1 } << n_cand_) - 1;
 	findNeighbours(all, &neighbours_);
 	const bool clipped_pass = clippedPass();
+	clipped_pass_ = clipped_pass;
 	const bool clipped_triangles = clippedTriangles();
 	if (clipped_pass || clipped_triangles)
 		findNeighbours(clipped_bits_, &clipped_neighbours_);
@@ -1701,7 +1751,10 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	 * hidden no face is complete, and the true pose comes only from there,
 	 * while a wrong, incomplete one may have come from the quadrilaterals.
 	 */
-	bool complete = clipped_pass && searchQuads(clipped_neighbours_, nullptr);
+	const int pool = std::min(n_cand_, config_.strongest_first);
+	strongest_ = pool >= 4 ? (std::uint64_t{ 1 } << pool) - 1 : 0;
+	bool complete = pool >= 4 && searchStrongestQuads(pool);
+	complete = complete || (clipped_pass && searchQuads(clipped_neighbours_, nullptr));
 	complete = complete ||
 		   searchQuads(neighbours_, clipped_pass ? &clipped_neighbours_ : nullptr);
 	for (const auto &h : kept_)

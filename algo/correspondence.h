@@ -10,9 +10,14 @@
  * neighbours: close up, reflections between a target's LEDs push them out of
  * each other's nearest candidates, but the LEDs clip where most reflections
  * do not), then among every candidate, skipping the sets already formed; the
- * NFA's count of tests includes both. A quadrilateral in convex position is
- * screened against every face in its 8 cyclic assignments by a perspective
- * invariant: where its diagonals cross, as fractions along each diagonal. Those fractions are the face's own
+ * NFA's count of tests includes both. Before either pass, the sets of four
+ * that they would form among the strongest_first strongest candidates come
+ * in the order of their weakest member (PROSAC's), and the passes skip them:
+ * the same hypotheses, but a target whose LEDs are among the brightest spots
+ * is found before every neighbour set of a bright reflection is tried.
+ * A quadrilateral in convex position is screened against every face in its
+ * 8 cyclic assignments by a perspective invariant: where its diagonals
+ * cross, as fractions along each diagonal. Those fractions are the face's own
  * under an affine view and move by at most a quarter of the diagonal's
  * relative depth change under perspective, a bound that follows from the
  * diagonal's image length and the largest view angle. Survivors go through the
@@ -111,6 +116,11 @@ struct CorrespondenceConfig {
 	/* Neighbours of each candidate that span its quadrilaterals, and its triangles. */
 	int neighbours = 9;
 	int triangle_neighbours = 4;
+	/*
+	 * The quadrilaterals among this many strongest candidates come first
+	 * (searchStrongestQuads(): at most C(12, 4) = 495 sets; 0: none).
+	 */
+	int strongest_first = 12;
 	/* Centroid error (px) the invariant screen tolerates beyond the blob's own sigma. */
 	double screen_sigma_px = 1.0;
 	/*
@@ -343,6 +353,15 @@ private:
 	bool clippedPass() const;
 	bool clippedTriangles() const;
 	static bool formedIn(const NeighbourTable &table, std::uint64_t set, int first);
+	/* What tryQuadSet() came to: the set tried, a pose that stops the search, the budget spent. */
+	enum class SetOutcome {
+		Tried,
+		Found,
+		Budget
+	};
+	SetOutcome tryQuadSet(const int members[4]);
+	bool searchStrongestQuads(int pool);
+	bool strongestTried(std::uint64_t set) const;
 	bool searchQuads(const NeighbourTable &table, const NeighbourTable *before);
 	bool searchTriangles(const NeighbourTable &table, const NeighbourTable *before);
 	bool fullSearch(const Pose *reference, CorrespondenceResult *result);
@@ -406,6 +425,10 @@ private:
 	/* Among every candidate, and among the clipped spots alone (see searchQuads()). */
 	NeighbourTable neighbours_;
 	NeighbourTable clipped_neighbours_;
+	/* The candidates (bits of cand_ positions) searchStrongestQuads() took: the strongest. */
+	std::uint64_t strongest_ = 0;
+	/* This frame's clipped spots have their own pass (clippedPass()). */
+	bool clipped_pass_ = false;
 	SolveContext context_;
 	double log10_quad_tests_ = 0.0; /* hypotheses the full search can form on this frame */
 	double log10_triangle_tests_ = 0.0;

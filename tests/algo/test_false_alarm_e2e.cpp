@@ -30,6 +30,8 @@
 #include <gtest/gtest.h>
 
 #include "algo/io/model_json.h"
+#include "algo/pipeline.h"
+#include "algo/pose.h"
 #include "algo/synth/evaluation.h"
 #include "tests/algo/fixtures.h"
 
@@ -340,6 +342,56 @@ INSTANTIATE_TEST_SUITE_P(HeavyClutter, EarlyExit, ::testing::ValuesIn(kExitFrame
 			 [](const ::testing::TestParamInfo<ExitFrame> &param_info) {
 				 return std::string(param_info.param.rule);
 			 });
+
+/*
+ * The strongest candidates' quadrilaterals first
+ * (CorrespondenceConfig::strongest_first): the same hypotheses in another
+ * order, so every frame ends as the anchor-by-anchor search alone ends it
+ * (the same status; the same pose, up to the refinement's convergence from
+ * another start), and frames whose LEDs are among the strongest spots end
+ * sooner. The benchmark's heavy-clutter frames (the wedge on the 1456 px
+ * camera, seed 43): in three of the 36 the search formed 931, 907 and 1227
+ * hypotheses before, 3, 3 and 49 with the prefix.
+ */
+TEST(StrongestFirst, TheSameOutcomesForFewerHypotheses)
+{
+	const auto target = loadTargetModel(test::dataPath("wedge.json"));
+	const auto camera = loadCameraIntrinsics(test::dataPath("cam1456.json"));
+	ASSERT_TRUE(target.isOk() && camera.isOk());
+	PipelineConfig plain;
+	plain.correspondence.strongest_first = 0;
+	ASSERT_GT(PipelineConfig{}.correspondence.strongest_first, 4);
+	Pipeline anchors_only(target.value(), camera.value(), plain);
+	EvaluationConfig e;
+	e.scenario = Scenario::HeavyClutter;
+	e.seed = 43;
+	e.frames = 36;
+	int found = 0, sooner = 0, later = 0;
+	long hypotheses = 0, hypotheses_plain = 0;
+	evaluate(target.value(), camera.value(), PipelineConfig{}, e,
+		 [&](const FrameOutcome &o, const Image &img) {
+			 anchors_only.reset();
+			 const PoseResult &p = anchors_only.process(img.view());
+			 const PoseResult &r = *o.result;
+			 EXPECT_EQ(r.status, p.status) << "frame " << o.index;
+			 if (r.found && p.found) {
+				 ++found;
+				 EXPECT_LT((r.t_mm - p.t_mm).norm(), 1e-3) << "frame " << o.index;
+				 EXPECT_LT(rotationAngleDeg(r.R, p.R), 1e-4) << "frame " << o.index;
+				 EXPECT_EQ(r.led_mask, p.led_mask) << "frame " << o.index;
+			 }
+			 hypotheses += r.hypotheses;
+			 hypotheses_plain += p.hypotheses;
+			 sooner += r.hypotheses < p.hypotheses;
+			 later += r.hypotheses > p.hypotheses;
+		 });
+	EXPECT_GT(found, 20);
+	EXPECT_LT(hypotheses, hypotheses_plain);
+	EXPECT_GT(sooner, later);
+	std::printf("[ strongest first ] %d frames with a pose; %ld hypotheses in all against %ld; "
+		    "%d frames sooner, %d later\n",
+		    found, hypotheses, hypotheses_plain, sooner, later);
+}
 
 } /* namespace */
 } /* namespace dockpose */
