@@ -1752,7 +1752,9 @@ bool Correspondence::fullSearch(const Pose *reference, CorrespondenceResult *res
 	 * while a wrong, incomplete one may have come from the quadrilaterals.
 	 */
 	const int pool = std::min(n_cand_, config_.strongest_first);
-	strongest_ = pool >= 4 ? (std::uint64_t{ 1 } << pool) - 1 : 0;
+	strongest_ = pool >= 64	 ? ~std::uint64_t{ 0 }
+		     : pool >= 4 ? (std::uint64_t{ 1 } << pool) - 1
+				 : 0;
 	bool complete = pool >= 4 && searchStrongestQuads(pool);
 	complete = complete || (clipped_pass && searchQuads(clipped_neighbours_, nullptr));
 	complete = complete ||
