@@ -271,6 +271,20 @@ void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
 	std::uint16_t *hist = hist_.data();
 	std::uint8_t *col_min = col_min_.data();
 
+	/*
+	 * The sample rows lie step_px_ rows apart, each on pages of its own: in a
+	 * frame fresh from the camera each would come at the memory's latency
+	 * in turn. Prefetched all at once first (about a sixteenth of a 1456 x
+	 * 1088 frame's lines), they come together: Thresholder::compute() on
+	 * fresh heavy-clutter frames 71-78 -> 61-67 us (docs/accuracy.md).
+	 */
+	for (int r = 0; r < rows; ++r)
+		for (int j = 0; j < row_count_[r]; ++j) {
+			const std::uint8_t *row = image.row(row_start_[r] + j * step);
+			for (int x = 0; x < width; x += 64)
+				__builtin_prefetch(row + x);
+		}
+
 	for (int r = 0; r < rows; ++r) {
 		std::fill(col_min, col_min + cols, std::uint8_t{ 255 });
 
