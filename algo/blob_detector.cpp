@@ -88,14 +88,6 @@ constexpr int kPrefetchRows = 8;
 constexpr int kPrefetchRowsWide = 2;
 constexpr int kNarrowPx = 1024;
 
-/* Bring the bytes [x0, x1) of one row towards the cache. */
-inline void prefetchRow(const std::uint8_t *row, int x0, int x1)
-{
-	for (int x = x0 & ~63; x < x1; x += 64)
-		__builtin_prefetch(row + x);
-	__builtin_prefetch(row + x1 - 1);
-}
-
 /* Variance of the rounding of a pixel to an integer level, levels^2. */
 constexpr double kQuantisationVar = 1.0 / 12.0;
 /*
@@ -387,11 +379,13 @@ bool BlobDetector::Impl::label(const ImageView &image, const ThresholdMap &map, 
 	int next_tile_y = window.y0;
 	for (int y = window.y0; y < window.y1; ++y) {
 		const std::uint8_t *p = image.row(y);
-		if (y + ahead < window.y1)
+		if (y + ahead < window.y1) {
 			prefetchRow(image.row(y + ahead), wx0, wx1);
-		else if (prefetch_next && next->y0 + (y + ahead - window.y1) < next->y1)
-			prefetchRow(image.row(next->y0 + (y + ahead - window.y1)), next->x0,
-				    next->x1);
+		} else if (prefetch_next) {
+			const int next_y = next->y0 + (y + ahead - window.y1);
+			if (next_y < next->y1)
+				prefetchRow(image.row(next_y), next->x0, next->x1);
+		}
 		/* The tile row, stepped instead of divided for (a short window row costs little else). */
 		if (y >= next_tile_y) {
 			map_row = std::min(y / tile, map_rows - 1);

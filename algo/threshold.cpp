@@ -279,11 +279,8 @@ void Thresholder::sampleTiles(const ImageView &image, int cols, int rows)
 	 * fresh heavy-clutter frames 71-78 -> 61-67 us (docs/accuracy.md).
 	 */
 	for (int r = 0; r < rows; ++r)
-		for (int j = 0; j < row_count_[r]; ++j) {
-			const std::uint8_t *row = image.row(row_start_[r] + j * step);
-			for (int x = 0; x < width; x += 64)
-				__builtin_prefetch(row + x);
-		}
+		for (int j = 0; j < row_count_[r]; ++j)
+			prefetchRow(image.row(row_start_[r] + j * step), 0, width);
 
 	for (int r = 0; r < rows; ++r) {
 		std::fill(col_min, col_min + cols, std::uint8_t{ 255 });
